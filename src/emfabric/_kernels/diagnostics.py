@@ -1,0 +1,81 @@
+"""Fabric-wide diagnostics of one state in a single pass over nodes and segments."""
+
+import math
+
+import numpy as np
+from numba import njit
+
+from emfabric._kernels.yarn import strain_energy_density
+
+# indices of the scalar results
+(KE, PX, PY, PZ, LX, LY, LZ, DEFLECTION, STRETCH, STRAIN, BROKEN, MIN_ALPHA, AHEAD_MIN,
+ AHEAD_MAX, APPROACH_MAX, RECEDE_MAX) = range(16)
+COUNT = 16
+
+
+@njit(cache=True)
+def fabric_diagnostics(x, v, xref, mass, seg_nodes, alpha, coef, rest, kind, fung_h,
+                       broken_below, centre, direction, out):
+    """Kinetic energy, momentum, angular momentum (about the origin), max |Δz|, max stretch,
+    strain energy, broken yarns, min α, and the nodes' extent/speed along the flight direction.
+    """
+    ke = 0.0
+    p = np.zeros(3)
+    ang = np.zeros(3)
+    defl = 0.0
+    ahead_min = math.inf
+    ahead_max = -math.inf
+    approach = -math.inf
+    recede = -math.inf
+    for n in range(x.shape[1]):
+        m = mass[n]
+        vx, vy, vz = v[0, n], v[1, n], v[2, n]
+        ke += 0.5 * m * (vx * vx + vy * vy + vz * vz)
+        p[0] += m * vx
+        p[1] += m * vy
+        p[2] += m * vz
+        ang[0] += m * (x[1, n] * vz - x[2, n] * vy)
+        ang[1] += m * (x[2, n] * vx - x[0, n] * vz)
+        ang[2] += m * (x[0, n] * vy - x[1, n] * vx)
+        dz = abs(x[2, n] - xref[2, n])
+        if dz > defl:
+            defl = dz
+        s = ((x[0, n] - centre[0]) * direction[0] + (x[1, n] - centre[1]) * direction[1]
+             + (x[2, n] - centre[2]) * direction[2])
+        ahead_min = min(ahead_min, s)
+        ahead_max = max(ahead_max, s)
+        vd = vx * direction[0] + vy * direction[1] + vz * direction[2]
+        approach = max(approach, -vd)
+        recede = max(recede, vd)
+    strain = 0.0
+    u2max = 0.0
+    broken = 0
+    amin = 1.0
+    for s in range(seg_nodes.shape[0]):
+        a = seg_nodes[s, 0]
+        b = seg_nodes[s, 1]
+        u2 = ((x[0, b] - x[0, a]) ** 2 + (x[1, b] - x[1, a]) ** 2
+              + (x[2, b] - x[2, a]) ** 2) / (rest[s] * rest[s])
+        if u2 > u2max:
+            u2max = u2
+        strain += alpha[s] * coef[s] * rest[s] * rest[s] * strain_energy_density(u2, kind, fung_h)
+        if alpha[s] < broken_below:
+            broken += 1
+        if alpha[s] < amin:
+            amin = alpha[s]
+    out[KE] = ke
+    out[PX] = p[0]
+    out[PY] = p[1]
+    out[PZ] = p[2]
+    out[LX] = ang[0]
+    out[LY] = ang[1]
+    out[LZ] = ang[2]
+    out[DEFLECTION] = defl
+    out[STRETCH] = math.sqrt(u2max)
+    out[STRAIN] = strain
+    out[BROKEN] = broken
+    out[MIN_ALPHA] = amin
+    out[AHEAD_MIN] = ahead_min
+    out[AHEAD_MAX] = ahead_max
+    out[APPROACH_MAX] = approach
+    out[RECEDE_MAX] = recede

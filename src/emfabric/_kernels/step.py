@@ -1,0 +1,127 @@
+"""One attempted φ-step: the coupled fixed-point iteration of section 3 (3.3–3.10, step 5a).
+
+Every iterate evaluates, in this order: yarn tensions and damage at the previous iterate; node
+forces (yarn + Lorentz + gravity) and the φ-update; contact and friction against the body's
+previous iterate; the body's translation and rotation from the summed reactions; the error
+measure ϖ_K. The initial iterate is the start-of-step state (ϖ_0 = 1).
+"""
+
+import math
+
+import numpy as np
+from numba import njit
+
+from emfabric._kernels.body import body_update
+from emfabric._kernels.contact import find_candidates, sphere_contact
+from emfabric._kernels.nodes import node_update
+from emfabric._kernels.sums import fsum
+from emfabric._kernels.yarn import yarn_tensions
+
+CONVERGED, NOT_CONVERGED, NOT_FINITE, CONTACT_MISSED = 0, 1, 2, 3
+
+
+@njit(cache=True)
+def _reaction_sums(nc, c_imp, c_arm, buf, imp_force, imp_moment):
+    """Exactly rounded totals of −J and −r × J over the contacts (order-independent)."""
+    for c in range(3):
+        for k in range(nc):
+            buf[k] = -c_imp[c, k]
+        imp_force[c] = fsum(buf, nc)
+    for c in range(3):
+        a, b = (c + 1) % 3, (c + 2) % 3
+        for k in range(nc):
+            buf[k] = -(c_arm[a, k] * c_imp[b, k] - c_arm[b, k] * c_imp[a, k])
+        imp_moment[c] = fsum(buf, nc)
+
+
+@njit(cache=True)
+def _nodes_inside(x, inv_mass, flag, centre, radius):
+    """Free nodes inside the sphere that were not contact candidates (must be none)."""
+    count = 0
+    for n in range(x.shape[1]):
+        if flag[n] == 0 and inv_mass[n] > 0.0:
+            dx = x[0, n] - centre[0]
+            dy = x[1, n] - centre[1]
+            dz = x[2, n] - centre[2]
+            if dx * dx + dy * dy + dz * dz < radius * radius:
+                count += 1
+    return count
+
+
+@njit(cache=True)
+def attempt_step(grid, fab, mat, fld, body, sin, sout, work, phi, dt, tol, kmax):
+    """Iterate the coupled step to ϖ_K ≤ tol within kmax iterations.
+
+    Returns (status, K, ϖ_K, contact count). On CONVERGED, sout holds the state at t + Δt and
+    alpha_t the trial damage to commit; sin is never written.
+    """
+    nx, ny = grid
+    mass, inv_mass, charge, coef, inv_l02 = fab
+    kind, fung_h, u_crit, rate = mat
+    efield, bfield, region, z0, grav = fld
+    has_body, radius, b_mass, b_inertia, q_pos, q_val, mu_s, mu_d = body
+    x0, v0, f0, alpha_c, b_in = sin
+    x1, v1, f1, alpha_t, b_out = sout
+    xbuf, t_seg, err_rows, cand, flag, c_node, c_imp, c_arm, c_proj, sum_buf = work
+
+    ncand = 0
+    if has_body:
+        # contact candidates: nodes that can reach the body within this step
+        speed = math.sqrt(np.sum(b_in[1] ** 2)) + radius * math.sqrt(np.sum(b_in[2] ** 2))
+        vmax = 0.0
+        for n in range(x0.shape[1]):
+            s2 = v0[0, n] ** 2 + v0[1, n] ** 2 + v0[2, n] ** 2
+            if s2 > vmax:
+                vmax = s2
+        reach = 1.05 * radius + 2.0 * dt * (speed + math.sqrt(vmax))
+        ncand = find_candidates(x0, inv_mass, b_in[0], reach, cand, flag)
+    else:
+        flag[:] = 0
+
+    imp_force = np.zeros(3)
+    imp_moment = np.zeros(3)
+    b_out[:] = b_in
+    # iterate K-1 is read from `prev`, iterate K written to `cur`; iterate 0 is x0 (ϖ_0 = 1)
+    xbuf[:] = x0
+    err = 1.0
+    nc = 0
+    k = 0
+    for k in range(1, kmax + 1):
+        prev = xbuf if k % 2 == 1 else x1
+        cur = x1 if k % 2 == 1 else xbuf
+        yarn_tensions(prev, nx, ny, alpha_c, coef, inv_l02, kind, fung_h, u_crit, rate, t_seg,
+                      alpha_t)
+        node_update(prev, x0, v0, f0, t_seg, nx, ny, mass, inv_mass, charge, phi, dt, efield,
+                    bfield, region, z0, grav, flag, cur, v1, f1, err_rows)
+        num_b = 0.0
+        den_b = 0.0
+        if has_body:
+            nc = sphere_contact(cand, ncand, nx, x0, prev, cur, v1, mass, b_out[0], b_out[1],
+                                b_out[2], radius, mu_s, mu_d, err_rows, c_node, c_imp, c_arm,
+                                c_proj)
+            _reaction_sums(nc, c_imp, c_arm, sum_buf, imp_force, imp_moment)
+            num_b, den_b = body_update(b_in, b_out, b_inertia, b_mass, q_pos, q_val, efield,
+                                       bfield, region, z0, grav, phi, dt, imp_force, imp_moment,
+                                       tol, radius)
+        # error measure, eq. 3.10 step 5a (fabric), and the same for the body
+        num = 0.0
+        den = 0.0
+        for j in range(ny):
+            num += err_rows[0, j]
+            den += err_rows[1, j]
+        err_f = num / den if den > 0.0 else (0.0 if num == 0.0 else 1.0)
+        err_b = num_b / den_b if den_b > 0.0 else (0.0 if num_b == 0.0 else 1.0)
+        err = max(err_f, err_b)
+        if not (math.isfinite(num) and math.isfinite(den) and math.isfinite(num_b)):
+            if k % 2 == 0:
+                x1[:] = xbuf
+            return NOT_FINITE, k, math.inf, nc
+        if err <= tol:
+            break
+    if k % 2 == 0:
+        x1[:] = xbuf
+    if err > tol:
+        return NOT_CONVERGED, k, err, nc
+    if has_body and _nodes_inside(x1, inv_mass, flag, b_out[0], radius) > 0:
+        return CONTACT_MISSED, k, err, nc
+    return CONVERGED, k, err, nc

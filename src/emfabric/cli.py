@@ -1,0 +1,171 @@
+"""Command line: ``emfabric run | validate | scenarios | plot | animate``."""
+
+from __future__ import annotations
+
+import json
+import signal
+import sys
+import time
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.table import Table
+
+from emfabric.scenario import ScenarioError, builtin_names, load_scenario, parse_override
+
+app = typer.Typer(
+    add_completion=False,
+    no_args_is_help=True,
+    help="Simulate a rigid projectile striking electromagnetically sensitive fabric.",
+)
+console = Console(stderr=True)
+out_console = Console()
+
+
+def _load(scenario: str, overrides: list[str] | None):
+    try:
+        pairs = dict(parse_override(o) for o in (overrides or []))
+        return load_scenario(scenario, pairs)
+    except ScenarioError as err:
+        console.print(f"[bold red]error:[/] {err}", highlight=False)
+        raise typer.Exit(2) from None
+
+
+def _sigterm_as_interrupt(*_args) -> None:
+    raise KeyboardInterrupt
+
+
+@app.command()
+def run(
+    scenario: Annotated[str, typer.Argument(
+        help="TOML file or built-in scenario name (see `emfabric scenarios`)")] = "paper-field",
+    out: Annotated[Path | None, typer.Option(
+        "--out", "-o", help="Output folder (default: runs/<scenario name>)")] = None,
+    set_: Annotated[list[str] | None, typer.Option(
+        "--set", help="Override a value, e.g. --set field.B=[0,0,0.1] (repeatable)")] = None,
+    plot: Annotated[bool, typer.Option("--plot", help="Draw the figures after the run")] = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar")] = False,
+    json_summary: Annotated[bool, typer.Option(
+        "--json", help="Print the summary as JSON on stdout")] = False,
+) -> None:
+    """Run a scenario; write history.nc, snapshots and ParaView files into the output folder."""
+    from emfabric.run import run as run_scenario
+
+    sc = _load(scenario, set_)
+    out_dir = out if out is not None else Path("runs") / sc.name
+    signal.signal(signal.SIGTERM, _sigterm_as_interrupt)
+    t_end = sc.solver.end_time
+    result = None
+    with Progress(
+        TextColumn("[bold]{task.description}"),
+        BarColumn(),
+        TextColumn("t = {task.fields[t]:7.2f} µs  Δt = {task.fields[dt]:.2e} s  "
+                   "K = {task.fields[k]}  {task.fields[rate]:7.1f} µs/min"),
+        TimeElapsedColumn(),
+        TimeRemainingColumn(),
+        console=console,
+        disable=quiet,
+        transient=False,
+    ) as bar:
+        task = bar.add_task(sc.name, total=t_end * 1e6, t=0.0, dt=0.0, k=0, rate=0.0)
+        wall0 = time.perf_counter()
+        last = [0.0]
+
+        def progress(state, info) -> None:
+            now = time.perf_counter()
+            if now - last[0] < 0.1:
+                return
+            last[0] = now
+            rate = state.t * 1e6 / max(now - wall0, 1e-9) * 60.0
+            bar.update(task, completed=state.t * 1e6, t=state.t * 1e6, dt=info.dt,
+                       k=info.iterations, rate=rate)
+
+        try:
+            result = run_scenario(sc, out_dir, progress=None if quiet else progress)
+            bar.update(task, completed=t_end * 1e6)
+        except KeyboardInterrupt as exc:
+            result = getattr(exc, "result", None)
+            console.print("[yellow]interrupted[/]: the history written so far is marked partial")
+        except Exception as exc:  # DivergenceError and friends
+            result = getattr(exc, "result", None)
+            console.print(f"[bold red]error:[/] {exc}", highlight=False)
+    if result is None:
+        raise typer.Exit(1)
+    _print_summary(result, json_summary)
+    if plot:
+        from emfabric.plots import plot_runs
+
+        files = plot_runs([out_dir])
+        console.print(f"figures: {out_dir / 'figures'} ({len(files)} files)")
+    if result.status != "complete":
+        raise typer.Exit(130 if result.status == "partial" else 1)
+
+
+def _print_summary(result, as_json: bool) -> None:
+    s = result.summary
+    if as_json:
+        out_console.print_json(json.dumps(s))
+        return
+    table = Table(title=f"{result.model.scenario.name}: {s['status']} ({s['end_reason']})",
+                  show_header=False)
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+
+    def fmt(v) -> str:
+        if isinstance(v, list):
+            return "[" + ", ".join(f"{c:.4g}" for c in v) + "]"
+        if isinstance(v, float):
+            return f"{v:.5g}"
+        return str(v)
+
+    for key, value in s.items():
+        if key in ("status", "end_reason"):
+            continue
+        table.add_row(key, fmt(value))
+    if result.out_dir is not None:
+        table.add_row("output", str(result.out_dir))
+    console.print(table)
+
+
+@app.command()
+def validate(
+    scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name")],
+    set_: Annotated[list[str] | None, typer.Option("--set", help="Override a value")] = None,
+    show: Annotated[bool, typer.Option("--show", help="Print the full scenario")] = False,
+) -> None:
+    """Check a scenario file; print the full scenario (defaults filled in) with --show."""
+    sc = _load(scenario, set_)
+    from emfabric.builder import build_model
+
+    try:
+        model = build_model(sc)
+    except ScenarioError as err:
+        console.print(f"[bold red]error:[/] {err}", highlight=False)
+        raise typer.Exit(2) from None
+    console.print(f"[green]ok[/]: {sc.name}: {model.nx} x {model.ny} nodes, "
+                  f"{model.seg_count} yarn segments, projectile: {sc.projectile.shape}")
+    if show:
+        out_console.print(sc.to_toml(), highlight=False, markup=False)
+
+
+@app.command()
+def scenarios() -> None:
+    """List the built-in scenarios."""
+    table = Table("name", "description")
+    for name in builtin_names():
+        table.add_row(name, load_scenario(name).description)
+    out_console.print(table)
+
+
+def main() -> None:  # pragma: no cover - console entry
+    try:
+        app()
+    except ScenarioError as err:
+        console.print(f"[bold red]error:[/] {err}")
+        sys.exit(2)
+
+
+from emfabric import cli_plot  # noqa: E402,F401  (registers `plot` and `animate`)

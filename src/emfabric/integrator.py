@@ -1,0 +1,195 @@
+"""The φ-scheme with fixed-point iteration and adaptive Δt (section 3, eqs. 3.2–3.10).
+
+``Integrator(model).step(s_in, s_out)`` advances one accepted step: it attempts Δt = s_in.dt,
+and on failure shrinks Δt by the controller (3.9) and restarts from t (s_in is never written).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from emfabric._kernels.body import field_wrench
+from emfabric._kernels.energy import step_energy
+from emfabric._kernels.nodes import node_update
+from emfabric._kernels.step import (
+    CONTACT_MISSED,
+    CONVERGED,
+    NOT_CONVERGED,
+    NOT_FINITE,
+    attempt_step,
+)
+from emfabric._kernels.yarn import yarn_tensions
+from emfabric.model import BODY_F, BODY_M, BODY_R0, BODY_V, BODY_W, BODY_X, Model, State
+
+
+class DivergenceError(RuntimeError):
+    """The step cannot converge even at dt_min; carries where and when."""
+
+    def __init__(self, message: str, t: float, dt: float, node: int, force: float):
+        super().__init__(message)
+        self.t, self.dt, self.node, self.force = t, dt, node, force
+
+
+@dataclass(frozen=True)
+class StepInfo:
+    """What one accepted step did."""
+
+    t: float
+    """Time reached [s]."""
+    dt: float
+    """Step just taken [s]."""
+    iterations: int
+    """Fixed-point iterations of the accepted attempt."""
+    error: float
+    """ϖ_K at acceptance."""
+    rejected: int
+    """Attempts rejected before this one."""
+    evaluations: int
+    """Force evaluations spent, rejected attempts included."""
+    contacts: int
+    """Nodes in contact at t + Δt."""
+
+
+def step_factor(error: float, k: int, tol: float, k_target: int, p: float) -> float:
+    """Φ_K of eq. 3.9 with ϖ_0 = 1: (TOL)^(1/(p K_d)) / (ϖ_K)^(1/(p K))."""
+    if error <= 0.0:
+        return math.inf
+    return tol ** (1.0 / (p * k_target)) / error ** (1.0 / (p * k))
+
+
+class Integrator:
+    """Holds the workspace of the step kernel for one Model."""
+
+    def __init__(self, model: Model):
+        self.model = model
+        m = model
+        n, s = m.node_count, m.seg_count
+        sc = m.scenario
+        coef = m.seg_modulus * m.yarn_area / m.seg_rest_length
+        self.coef = coef
+        self.grid = (m.nx, m.ny)
+        self.fab = (m.node_mass, m.node_inv_mass, m.node_charge, coef,
+                    1.0 / m.seg_rest_length**2)
+        self.mat = (m.material_kind, m.fung_H, m.critical_stretch, m.damage_rate)
+        self.fld = (m.field_E, m.field_B, m.field_region, m.field_z0, m.gravity)
+        self.body = (m.has_body, m.body_radius, m.body_mass, m.body_inertia, m.body_charge_pos,
+                     m.body_charge, sc.contact.static_friction, sc.contact.dynamic_friction)
+        self.work = (
+            np.empty((3, n)),  # second iterate buffer
+            np.empty((3, s)),  # segment tension vectors
+            np.empty((2, m.ny)),  # per-row error sums
+            np.empty(n, dtype=np.int64),  # contact candidates
+            np.zeros(n, dtype=np.uint8),  # candidate flags
+            np.empty(n, dtype=np.int64),  # contact nodes
+            np.empty((3, n)),  # contact impulses
+            np.empty((3, n)),  # contact arms
+            np.empty((3, n)),  # projection displacements
+            np.empty(n),  # summation buffer
+        )
+        solver = sc.solver
+        self.phi = solver.phi
+        self.tol = solver.tolerance
+        self.k_target = solver.target_iterations if solver.adaptive else solver.max_iterations
+        self.p = solver.exponent
+        self.safety = solver.safety
+        self.adaptive = solver.adaptive
+        self.dt_max = solver.dt_max
+        self.dt_min = solver.dt_min
+
+    def step(self, s_in: State, s_out: State, *, dt_limit: float = math.inf) -> StepInfo:
+        """Advance s_in by one accepted step into s_out; s_in is left untouched."""
+        m = self.model
+        dt = min(s_in.dt, dt_limit)
+        rejected = 0
+        evaluations = 0
+        sin = (s_in.node_x, s_in.node_v, s_in.node_f, s_in.seg_alpha, s_in.body)
+        sout = (s_out.node_x, s_out.node_v, s_out.node_f, s_out.seg_alpha, s_out.body)
+        while True:
+            status, k, err, nc = attempt_step(self.grid, self.fab, self.mat, self.fld, self.body,
+                                              sin, sout, self.work, self.phi, dt, self.tol,
+                                              self.k_target)
+            evaluations += k
+            if status == CONVERGED:
+                break
+            if not self.adaptive:
+                self._fail(s_in, dt, f"no convergence in {k} iterations at fixed Δt "
+                           f"(ϖ = {err:.3g} > tolerance {self.tol:g}); lower solver.dt_max")
+            if status == NOT_CONVERGED:
+                factor = self.safety * step_factor(err, k, self.tol, self.k_target, self.p)
+                factor = min(factor, 0.9)
+            elif status == CONTACT_MISSED:
+                factor = 0.5
+            else:  # NOT_FINITE
+                factor = 0.1
+            rejected += 1
+            dt *= factor
+            if dt < self.dt_min:
+                what = "non-finite values" if status == NOT_FINITE else (
+                    f"ϖ = {err:.3g} after {k} iterations")
+                self._fail(s_in, dt, f"step cannot converge even at Δt < dt_min = "
+                           f"{self.dt_min:g} s ({what})")
+        # accept: time advances by the step just taken
+        s_out.t = s_in.t + dt
+        if self.adaptive:
+            grow = self.safety * step_factor(err, k, self.tol, self.k_target, self.p)
+            s_out.dt = min(self.dt_max, dt * grow)
+        else:
+            s_out.dt = s_in.dt
+        s_out.energy[:] = s_in.energy
+        xbuf, _t, _e, _c, _f, c_node, c_imp, c_arm, c_proj, _b = self.work
+        step_energy(s_in.node_x, s_out.node_x, s_in.node_v, s_out.node_v, s_out.node_f,
+                    m.node_mass, m.node_inv_mass, m.node_charge, m.field_E, m.field_B,
+                    m.field_region, m.field_z0, m.gravity, self.phi, nc, c_node, c_imp, c_arm,
+                    c_proj, s_in.body, s_out.body, m.body_charge_pos, m.body_charge,
+                    m.body_mass, m.seg_nodes, s_in.seg_alpha, s_out.seg_alpha, self.coef,
+                    m.seg_rest_length, m.material_kind, m.fung_H, s_out.energy)
+        s_out.steps = s_in.steps + 1
+        s_out.rejected = s_in.rejected + rejected
+        s_out.evaluations = s_in.evaluations + evaluations
+        s_out.iterations = k
+        s_out.error = err
+        s_out.contact_count = nc
+        return StepInfo(t=s_out.t, dt=dt, iterations=k, error=err, rejected=rejected,
+                        evaluations=evaluations, contacts=nc)
+
+    def _fail(self, s_in: State, dt: float, why: str) -> None:
+        f = np.linalg.norm(s_in.node_f, axis=0)
+        node = int(np.argmax(f)) if f.size else -1
+        fmax = float(f[node]) if f.size else 0.0
+        i, j = node % self.model.nx, node // self.model.nx
+        raise DivergenceError(
+            f"diverged at t = {s_in.t:.6g} s, Δt = {dt:.3g} s: {why}; largest force "
+            f"{fmax:.3g} N on node {node} (grid i={i}, j={j}) at "
+            f"{tuple(round(float(c), 6) for c in s_in.node_x[:, node])} m",
+            s_in.t, dt, node, fmax,
+        )
+
+
+def initial_forces(model: Model, state: State) -> None:
+    """ψ(t) of the start state: yarn + Lorentz + gravity on the nodes, field and gravity on the
+    body (the first step's explicit part)."""
+    m = model
+    t_seg = np.empty((3, m.seg_count))
+    alpha = np.empty(m.seg_count)
+    coef = m.seg_modulus * m.yarn_area / m.seg_rest_length
+    yarn_tensions(state.node_x, m.nx, m.ny, state.seg_alpha, coef, 1.0 / m.seg_rest_length**2,
+                  m.material_kind, m.fung_H, m.critical_stretch, m.damage_rate, t_seg, alpha)
+    x1 = np.empty_like(state.node_x)
+    v1 = np.empty_like(state.node_v)
+    # Δt = 0, φ = 1: the update returns v1 = v0 and ψ(x0, v0) in node_f
+    node_update(state.node_x, state.node_x, state.node_v, np.zeros_like(state.node_f), t_seg,
+                m.nx, m.ny, m.node_mass, m.node_inv_mass, m.node_charge, 1.0, 0.0, m.field_E,
+                m.field_B, m.field_region, m.field_z0, m.gravity,
+                np.ones(m.node_count, dtype=np.uint8), x1, v1, state.node_f, np.empty((2, m.ny)))
+    if m.has_body:
+        b = state.body
+        field_wrench(b[BODY_X], b[BODY_V], b[BODY_W], b[BODY_R0:BODY_R0 + 3], m.body_charge_pos,
+                     m.body_charge, m.field_E, m.field_B, m.field_region, m.field_z0,
+                     m.body_mass, m.gravity, b[BODY_F], b[BODY_M])
+
+
+__all__ = ["DivergenceError", "Integrator", "StepInfo", "initial_forces", "step_factor",
+           "NOT_CONVERGED"]

@@ -1,0 +1,1 @@
+"""Output files: history (netCDF), snapshots (netCDF + ParaView VTU/PVD)."""

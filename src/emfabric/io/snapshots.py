@@ -1,0 +1,153 @@
+"""Snapshots: node positions, velocities and yarn damage at intervals.
+
+Written twice over: ``snapshots.nc`` (xarray-readable, what the plotting code reads) and a
+ParaView time series ``fabric.pvd`` + ``projectile.pvd`` over ``vtk/*.vtu`` files.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+import meshio
+import numpy as np
+import xarray as xr
+
+from emfabric.io.atomic import write_atomic
+from emfabric.model import Model, State
+
+
+class Snapshots:
+    """Holds the snapshots of one run in memory; writes them atomically on demand."""
+
+    def __init__(self, model: Model, out_dir: Path | None):
+        self.model = model
+        self.out_dir = out_dir
+        self.times: list[float] = []
+        self.x: list[np.ndarray] = []
+        self.v: list[np.ndarray] = []
+        self.alpha: list[np.ndarray] = []
+        self.body: list[np.ndarray] = []
+        self._sphere = _sphere_mesh(model.body_radius) if model.has_body else None
+
+    def take(self, state: State) -> None:
+        self.times.append(state.t)
+        self.x.append(state.node_x.T.copy())
+        self.v.append(state.node_v.T.copy())
+        self.alpha.append(state.seg_alpha.copy())
+        self.body.append(state.body.copy())
+        if self.out_dir is not None:
+            self._write_vtk(len(self.times) - 1)
+
+    def to_dataset(self, attrs: dict[str, str]) -> xr.Dataset:
+        m = self.model
+        body = np.array(self.body).reshape(-1, 8, 3)
+        ds = xr.Dataset(
+            {
+                "node_position": (("snapshot", "node", "xyz"), np.array(self.x),
+                                  {"units": "m", "long_name": "node position"}),
+                "node_velocity": (("snapshot", "node", "xyz"), np.array(self.v),
+                                  {"units": "m s-1", "long_name": "node velocity"}),
+                "yarn_damage": (("snapshot", "segment"), np.array(self.alpha),
+                                {"units": "1", "long_name": "yarn damage α (1 intact, 0 broken)"}),
+                "projectile_position": (("snapshot", "xyz"), body[:, 0],
+                                        {"units": "m", "long_name": "projectile centre of mass"}),
+                "projectile_velocity": (("snapshot", "xyz"), body[:, 1], {"units": "m s-1"}),
+                "angular_velocity": (("snapshot", "xyz"), body[:, 2], {"units": "rad s-1"}),
+                "projectile_rotation": (("snapshot", "xyz", "body_axis"), body[:, 5:8],
+                                        {"units": "1",
+                                         "long_name": "rotation matrix body -> inertial frame"}),
+                "segment_nodes": (("segment", "end"), m.seg_nodes,
+                                  {"long_name": "node indices of each yarn segment"}),
+                "reference_position": (("node", "xyz"), m.node_x0.T,
+                                       {"units": "m", "long_name": "node position at t = 0"}),
+                "projectile_nose_body": (("xyz",), m.body_nose,
+                                         {"units": "m", "long_name": "nose marker, body frame"}),
+            },
+            coords={
+                "time": ("snapshot", np.array(self.times), {"units": "s", "standard_name": "time"}),
+                "xyz": ("xyz", np.array(["x", "y", "z"])),
+            },
+            attrs={**attrs, "grid_nx": m.nx, "grid_ny": m.ny,
+                   "projectile_radius": m.body_radius if m.has_body else 0.0,
+                   "has_projectile": int(m.has_body)},
+        )
+        return ds
+
+    def write(self, attrs: dict[str, str]) -> None:
+        if self.out_dir is None or not self.times:
+            return
+        ds = self.to_dataset(attrs)
+        write_atomic(self.out_dir / "snapshots.nc",
+                     lambda tmp: ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4"))
+        self._write_pvd("fabric")
+        if self.model.has_body:
+            self._write_pvd("projectile")
+
+    def _write_vtk(self, k: int) -> None:
+        m = self.model
+        folder = self.out_dir / "vtk"
+        folder.mkdir(parents=True, exist_ok=True)
+        x = self.x[k]
+        mesh = meshio.Mesh(
+            points=x,
+            cells=[("line", m.seg_nodes)],
+            point_data={"velocity": self.v[k], "displacement": x - m.node_x0.T},
+            cell_data={"damage": [self.alpha[k]]},
+        )
+        write_atomic(folder / f"fabric_{k:05d}.vtu", lambda tmp: meshio.write(
+            tmp, mesh, file_format="vtu", binary=True))
+        if self._sphere is not None:
+            pts, tris = self._sphere
+            b = self.body[k]
+            rot = b[5:8]
+            nose = rot @ m.body_nose
+            world = pts @ rot.T + b[0]
+            along = (pts @ (m.body_nose / np.linalg.norm(m.body_nose))) / m.body_radius
+            body_mesh = meshio.Mesh(
+                points=world, cells=[("triangle", tris)],
+                point_data={"nose_alignment": along,
+                            "velocity": np.tile(b[1], (len(pts), 1))},
+                field_data={"nose": nose},
+            )
+            write_atomic(folder / f"projectile_{k:05d}.vtu", lambda tmp: meshio.write(
+                tmp, body_mesh, file_format="vtu", binary=True))
+
+    def _write_pvd(self, stem: str) -> None:
+        lines = ['<?xml version="1.0"?>',
+                 '<VTKFile type="Collection" version="0.1" byte_order="LittleEndian">',
+                 "  <Collection>"]
+        for k, t in enumerate(self.times):
+            name = quoteattr(f"vtk/{stem}_{k:05d}.vtu")
+            lines.append(f'    <DataSet timestep="{t:.9e}" part="0" file={name}/>')
+        lines += ["  </Collection>", "</VTKFile>", ""]
+        text = "\n".join(lines)
+        write_atomic(self.out_dir / f"{stem}.pvd", lambda tmp: tmp.write_text(text))
+
+
+def _sphere_mesh(radius: float, n_lat: int = 12, n_lon: int = 24):
+    """A UV-sphere surface (points relative to the centre, triangles)."""
+    pts = [[0.0, 0.0, radius]]
+    for i in range(1, n_lat):
+        th = np.pi * i / n_lat
+        for j in range(n_lon):
+            ph = 2 * np.pi * j / n_lon
+            pts.append([radius * np.sin(th) * np.cos(ph), radius * np.sin(th) * np.sin(ph),
+                        radius * np.cos(th)])
+    pts.append([0.0, 0.0, -radius])
+    pts = np.array(pts)
+    tris = []
+    south = len(pts) - 1
+    for j in range(n_lon):
+        tris.append([0, 1 + j, 1 + (j + 1) % n_lon])
+    for i in range(n_lat - 2):
+        a0 = 1 + i * n_lon
+        b0 = a0 + n_lon
+        for j in range(n_lon):
+            a, b = a0 + j, a0 + (j + 1) % n_lon
+            c, d = b0 + j, b0 + (j + 1) % n_lon
+            tris += [[a, c, b], [b, c, d]]
+    last = 1 + (n_lat - 2) * n_lon
+    for j in range(n_lon):
+        tris.append([last + j, south, last + (j + 1) % n_lon])
+    return pts, np.array(tris, dtype=np.int64)

@@ -1,0 +1,360 @@
+"""Scenario files: the TOML schema as validated, frozen types; load, dump, dotted overrides.
+
+Every default is the paper's section-5 value (Zohdi, model problem), so an empty file is the
+paper's field-on case. Unknown keys and bad values raise :class:`ScenarioError`, whose message
+names the key's dotted path, the value given and what is allowed.
+"""
+
+from __future__ import annotations
+
+import ast
+import copy
+import tomllib
+from importlib import resources
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import tomli_w
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
+
+Vec3 = tuple[float, float, float]
+PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+NonNegFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+FiniteVec3 = tuple[FiniteFloat, FiniteFloat, FiniteFloat]
+
+
+class ScenarioError(ValueError):
+    """A scenario file or override is invalid; the message names key, value and what is allowed."""
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+
+
+class Material(_Section):
+    model: Literal["kirchhoff-saint-venant", "fung"] = "kirchhoff-saint-venant"
+    youngs_modulus: PositiveFloat = 126e9
+    """Mean Young's modulus of a yarn [Pa] (KSV law)."""
+    modulus_cv: NonNegFloat = 0.10
+    """Coefficient of variation of the per-yarn modulus (Gaussian scatter)."""
+    seed: Annotated[int, Field(ge=0)] = 0
+    """Seed of numpy.random.default_rng for the modulus scatter."""
+    c: PositiveFloat | None = None
+    """Fung constant c [Pa] (model = "fung")."""
+    H: PositiveFloat | None = None
+    """Fung constant H [-] (model = "fung")."""
+
+    @model_validator(mode="after")
+    def _fung_needs_constants(self) -> Material:
+        if self.model == "fung":
+            missing = [k for k in ("c", "H") if getattr(self, k) is None]
+            if missing:
+                raise ValueError(
+                    f"model = 'fung' needs {' and '.join(missing)} (positive numbers): "
+                    "S = c·H·E·exp(H·E²/2)"
+                )
+        return self
+
+
+class Damage(_Section):
+    critical_stretch: Annotated[float, Field(ge=1.0, allow_inf_nan=False)] = 1.03
+    """U_crit of eq. 2.6 [-]."""
+    rate: NonNegFloat = 0.1
+    """Damage decay parameter λ of eq. 2.6 [-]; 0 disables damage."""
+    broken_below: Annotated[float, Field(gt=0, lt=1)] = 0.01
+    """A yarn whose α falls below this counts as broken in the statistics."""
+
+
+class Fabric(_Section):
+    nodes: tuple[Annotated[int, Field(ge=2)], Annotated[int, Field(ge=2)]] = (100, 100)
+    size: tuple[PositiveFloat, PositiveFloat] = (0.254, 0.254)
+    """Sheet size [m] along x and y."""
+    areal_density: PositiveFloat = 0.12784
+    """[kg/m²]."""
+    yarn_radius: PositiveFloat = 0.000185
+    """[m]; A0 = π r²."""
+    charge_per_node: FiniteFloat = 1.0
+    """[C]."""
+    edges: Literal["clamped", "free"] = "clamped"
+    velocity: FiniteVec3 = (0.0, 0.0, 0.0)
+    """Initial velocity of every free node [m/s]."""
+    rescale: bool = False
+    """Run this grid as the same fabric as `reference_nodes`: yarn area scales with spacing
+    (same stiffness per unit width), charge with node mass (same q/m)."""
+    reference_nodes: tuple[Annotated[int, Field(ge=2)], Annotated[int, Field(ge=2)]] = (100, 100)
+    material: Material = Material()
+    damage: Damage = Damage()
+
+
+class PointCharge(_Section):
+    position: FiniteVec3
+    """Position relative to the centre of mass, body frame at t = 0 [m]."""
+    charge: FiniteFloat
+    """[C]."""
+
+
+class Projectile(_Section):
+    shape: Literal["sphere", "none"] = "sphere"
+    radius: PositiveFloat = 0.02635
+    mass: PositiveFloat = 0.037
+    position: FiniteVec3 | None = None
+    """Centre of mass [m]; default: lowest point `gap` above the sheet centre."""
+    gap: NonNegFloat = 1e-4
+    """Initial clearance below the sphere when `position` is not given [m]."""
+    velocity: FiniteVec3 = (0.0, 0.0, -250.0)
+    angular_velocity: FiniteVec3 = (0.0, 0.0, 0.0)
+    principal_inertia: tuple[PositiveFloat, PositiveFloat, PositiveFloat] | None = None
+    """Principal moments of inertia [kg m²] along the body axes; default 2/5·m·R² (sphere)."""
+    charges: tuple[PointCharge, ...] = ()
+    """Charged points fixed on the body (section 6)."""
+
+
+class FieldSpec(_Section):
+    E: FiniteVec3 = (0.0, 0.0, 0.0)
+    """Electric field [V/m]."""
+    B: FiniteVec3 = (0.05, 0.0, 0.0)
+    """Magnetic field [T]."""
+    region: Literal["uniform", "half-space"] = "uniform"
+    z0: FiniteFloat = 0.0
+    """With region = "half-space": the field acts where z < z0 [m]."""
+    gravity: FiniteVec3 = (0.0, 0.0, 0.0)
+    """Gravitational acceleration [m/s²] (off by default)."""
+
+
+class Contact(_Section):
+    static_friction: NonNegFloat = 1.0
+    dynamic_friction: NonNegFloat = 0.95
+
+    @model_validator(mode="after")
+    def _dynamic_not_above_static(self) -> Contact:
+        if self.dynamic_friction > self.static_friction:
+            raise ValueError(
+                f"dynamic_friction = {self.dynamic_friction} exceeds static_friction = "
+                f"{self.static_friction}; allowed: dynamic_friction ≤ static_friction"
+            )
+        return self
+
+
+class Solver(_Section):
+    scheme: Literal["fixed-point", "anderson"] = "fixed-point"
+    """Nonlinear solver of each φ-step: the paper's fixed-point iteration, or Anderson-accelerated."""
+    phi: Annotated[float, Field(ge=0.0, le=1.0)] = 0.5
+    tolerance: PositiveFloat = 1e-6
+    target_iterations: Annotated[int, Field(ge=1, le=1000)] = 6
+    exponent: PositiveFloat = 2.0
+    """p of eq. 3.9."""
+    adaptive: bool = True
+    """False: fixed Δt = dt_max, iterate to `tolerance` within `max_iterations`."""
+    max_iterations: Annotated[int, Field(ge=1, le=100000)] = 200
+    dt_max: PositiveFloat = 1e-6
+    dt_min: PositiveFloat = 1e-13
+    dt_initial: PositiveFloat | None = None
+    """First Δt tried; default dt_max (the paper)."""
+    end_time: PositiveFloat = 300e-6
+    safety: Annotated[float, Field(gt=0, le=1)] = 0.9
+    """Factor on Φ_K of eq. 3.9; 1.0 is the paper-literal controller."""
+    anderson_depth: Annotated[int, Field(ge=1, le=20)] = 5
+
+    @model_validator(mode="after")
+    def _dt_order(self) -> Solver:
+        if self.dt_min >= self.dt_max:
+            raise ValueError(
+                f"dt_min = {self.dt_min} must be smaller than dt_max = {self.dt_max}"
+            )
+        if self.dt_initial is not None and not self.dt_min <= self.dt_initial <= self.dt_max:
+            raise ValueError(
+                f"dt_initial = {self.dt_initial} must lie in [dt_min, dt_max] = "
+                f"[{self.dt_min}, {self.dt_max}]"
+            )
+        return self
+
+
+class Output(_Section):
+    snapshot_interval: PositiveFloat = 10e-6
+    """Simulated time between snapshots [s]."""
+    checkpoint_seconds: PositiveFloat = 30.0
+    """Wall time between rewrites of history.nc during a run [s]."""
+
+
+class Scenario(_Section):
+    name: str = "custom"
+    description: str = ""
+    fabric: Fabric = Fabric()
+    projectile: Projectile = Projectile()
+    field: FieldSpec = FieldSpec()
+    contact: Contact = Contact()
+    solver: Solver = Solver()
+    output: Output = Output()
+
+    @field_validator("name")
+    @classmethod
+    def _name_is_simple(cls, v: str) -> str:
+        if not v or any(ch in v for ch in "/\\\n"):
+            raise ValueError("name must be a non-empty single line without slashes")
+        return v
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain dict of every value (defaults included), None entries dropped."""
+        return _drop_none(self.model_dump(mode="python"))
+
+    def to_toml(self) -> str:
+        """The full scenario as TOML text (every default written out)."""
+        return tomli_w.dumps(_tomlable(self.to_dict()))
+
+    def replace(self, **dotted: Any) -> Scenario:
+        """A copy with dotted-key overrides: ``s.replace(**{"field.B": [0, 0, 0.1]})``."""
+        return apply_overrides(self, dotted)
+
+
+def _drop_none(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {k: _drop_none(v) for k, v in obj.items() if v is not None}
+    if isinstance(obj, list | tuple):
+        return [_drop_none(v) for v in obj]
+    return obj
+
+
+def _tomlable(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {k: _tomlable(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_tomlable(v) for v in obj]
+    return obj
+
+
+def _format_errors(err: ValidationError, source: str) -> str:
+    lines = [f"invalid scenario ({source}):"]
+    for e in err.errors():
+        path = ".".join(str(p) for p in e["loc"])
+        value = e.get("input")
+        msg = e["msg"]
+        if e["type"] == "extra_forbidden":
+            parent = ".".join(str(p) for p in e["loc"][:-1])
+            allowed = _allowed_keys(parent)
+            msg = f"unknown key; allowed keys here: {', '.join(allowed)}"
+            lines.append(f"  {path}: {msg}")
+            continue
+        if e["type"] == "literal_error" and "expected" in e.get("ctx", {}):
+            msg = f"must be one of {e['ctx']['expected']}"
+        shown = repr(value) if not isinstance(value, dict) else "{...}"
+        lines.append(f"  {path} = {shown}: {msg}")
+    return "\n".join(lines)
+
+
+def _allowed_keys(dotted_parent: str) -> list[str]:
+    model: type[BaseModel] = Scenario
+    for part in [p for p in dotted_parent.split(".") if p]:
+        if part.isdigit():
+            continue
+        field = model.model_fields.get(part)
+        if field is None:
+            return []
+        ann = field.annotation
+        sub = _model_in(ann)
+        if sub is None:
+            return []
+        model = sub
+    return sorted(model.model_fields)
+
+
+def _model_in(ann: Any) -> type[BaseModel] | None:
+    if isinstance(ann, type) and issubclass(ann, BaseModel):
+        return ann
+    for arg in getattr(ann, "__args__", ()) or ():
+        found = _model_in(arg)
+        if found is not None:
+            return found
+    return None
+
+
+def scenario_from_dict(data: dict[str, Any], source: str = "<dict>") -> Scenario:
+    """Validate a nested dict into a Scenario; errors name the dotted key."""
+    try:
+        return Scenario.model_validate(data)
+    except ValidationError as err:
+        raise ScenarioError(_format_errors(err, source)) from None
+
+
+def builtin_names() -> list[str]:
+    """Names of the built-in scenarios shipped in ``emfabric/scenarios``."""
+    folder = resources.files("emfabric") / "scenarios"
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+def builtin_text(name: str) -> str:
+    folder = resources.files("emfabric") / "scenarios"
+    path = folder / f"{name}.toml"
+    if not path.is_file():
+        raise ScenarioError(
+            f"no built-in scenario named {name!r}; built-in: {', '.join(builtin_names())}"
+        )
+    return path.read_text(encoding="utf-8")
+
+
+def load_scenario(source: str | Path, overrides: dict[str, Any] | None = None) -> Scenario:
+    """Load a scenario from a TOML path or a built-in name, then apply dotted overrides."""
+    path = Path(source)
+    if path.suffix == ".toml" or path.exists():
+        if not path.is_file():
+            raise ScenarioError(f"scenario file {str(path)!r} does not exist")
+        text = path.read_text(encoding="utf-8")
+        label = str(path)
+    else:
+        text = builtin_text(str(source))
+        label = f"built-in {source!r}"
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ScenarioError(f"invalid TOML in {label}: {err}") from None
+    data.setdefault("name", path.stem if label == str(path) else str(source))
+    scenario = scenario_from_dict(data, label)
+    return apply_overrides(scenario, overrides or {})
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """Parse ``key.path=value`` (value as TOML, else a Python literal, else a string)."""
+    if "=" not in text:
+        raise ScenarioError(f"override {text!r} must look like section.key=value")
+    key, raw = text.split("=", 1)
+    key, raw = key.strip(), raw.strip()
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        try:
+            value = ast.literal_eval(raw)
+        except (ValueError, SyntaxError):
+            value = raw
+    return key, value
+
+
+def apply_overrides(scenario: Scenario, overrides: dict[str, Any]) -> Scenario:
+    """Return a new validated Scenario with ``{"a.b.c": value}`` overrides applied."""
+    if not overrides:
+        return scenario
+    data = copy.deepcopy(scenario.to_dict())
+    for key, value in overrides.items():
+        parts = key.split(".")
+        node = data
+        for i, part in enumerate(parts[:-1]):
+            sub = node.get(part)
+            if sub is None:
+                sub = {}
+                node[part] = sub
+            if not isinstance(sub, dict):
+                prefix = ".".join(parts[: i + 1])
+                raise ScenarioError(f"override {key!r}: {prefix!r} is a value, not a section")
+            node = sub
+        node[parts[-1]] = value
+    return scenario_from_dict(data, "overrides " + ", ".join(overrides))
+
+
+def dump_scenario(scenario: Scenario, path: str | Path) -> None:
+    Path(path).write_text(scenario.to_toml(), encoding="utf-8")
