@@ -142,7 +142,7 @@ class Integrator:
         xbuf, _t, _e, _c, _f, c_node, c_imp, c_arm, c_proj, _b = self.work
         step_energy(s_in.node_x, s_out.node_x, s_in.node_v, s_out.node_v, s_out.node_f,
                     m.node_mass, m.node_inv_mass, m.node_charge, m.field_E, m.field_B,
-                    m.field_region, m.field_z0, m.gravity, self.phi, nc, c_node, c_imp, c_arm,
+                    m.field_region, m.field_z0, m.gravity, self.phi, dt, nc, c_node, c_imp, c_arm,
                     c_proj, s_in.body, s_out.body, m.body_charge_pos, m.body_charge,
                     m.body_mass, m.seg_nodes, s_in.seg_alpha, s_out.seg_alpha, self.coef,
                     m.seg_rest_length, m.material_kind, m.fung_H, s_out.energy)

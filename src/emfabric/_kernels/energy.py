@@ -3,9 +3,10 @@
 With v̄ = (v0 + v1)/2 the φ-scheme gives exactly ΔKE = (Δt ψ̄ + J)·v̄ for a node, and the same
 for the body, so the work of a contact impulse J on the pair (node, body point) is
 J·(v̄_node − v̄_point); its negative is what contact (normal part) and friction (tangential part)
-dissipate. Field and gravity work use the displacements; the position projection of a contact
-node moves it by Δ without any force working, so the work the non-impulsive, non-magnetic forces
-would do over Δ is booked as projection dissipation. Damage releases α-drop × stored energy.
+dissipate. Field and gravity work use the displacements. A contact node's displacement differs
+from the φ-update's Δt(φ v1 + (1−φ) v0) by δ = Δ − φΔt J/m (Δ: the projection jump); the work
+the non-impulsive, non-magnetic forces do over δ is not seen by the velocity update and is booked
+as projection dissipation. Damage releases α-drop × stored energy.
 """
 
 import math
@@ -18,7 +19,7 @@ from emfabric._kernels.yarn import strain_energy_density
 
 
 @njit(cache=True)
-def step_energy(x0, x1, v0, v1, f1, mass, inv_mass, charge, efield, bfield, region, z0, grav, phi,
+def step_energy(x0, x1, v0, v1, f1, mass, inv_mass, charge, efield, bfield, region, z0, grav, phi, dt,
                 nc, c_node, c_imp, c_arm, c_proj, b_in, b_out, q_pos, q_val, b_mass, seg_nodes,
                 alpha_old, alpha_new, coef, rest, kind, fung_h, out):
     """Add this step's field work, gravity work and dissipations to out (6,) [J]."""
@@ -62,11 +63,11 @@ def step_energy(x0, x1, v0, v1, f1, mass, inv_mass, charge, efield, bfield, regi
         jn = np.sum(jv * nh)
         d_cont += jn * np.sum(nh * rel)
         d_fric += np.sum((jv - jn * nh) * rel)
-        # forces of the φ-update over the projection jump (magnetic part excluded: no work)
+        # forces of the φ-update over the unseen displacement δ (magnetic part does no work)
         q1 = charge[n] if in_field(x1[2, n], region, z0) else 0.0
         vpred = v1[:, n] - jv / mass[n]
         fnm = f1[:, n] - q1 * np.cross(vpred, bfield)
-        d_proj += np.sum(fnm * c_proj[:, k])
+        d_proj += np.sum(fnm * (c_proj[:, k] - phi * dt * jv / mass[n]))
 
     d_dam = 0.0
     for s in range(alpha_old.shape[0]):

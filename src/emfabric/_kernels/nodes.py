@@ -26,6 +26,7 @@ def node_update(xk, x0, v0, f0, t_seg, nx, ny, mass, inv_mass, charge, phi, dt, 
     nw = ny * (nx - 1)
     ex, ey, ez = efield[0], efield[1], efield[2]
     bx, by, bz = bfield[0], bfield[1], bfield[2]
+    tx, ty, tz = t_seg[0], t_seg[1], t_seg[2]
     for j in range(ny):
         num = 0.0
         den = 0.0
@@ -40,41 +41,28 @@ def node_update(xk, x0, v0, f0, t_seg, nx, ny, mass, inv_mass, charge, phi, dt, 
                     f1[c, n] = 0.0
                 continue
             # yarn forces: one difference per node and direction (mirror-exact assembly)
-            fx = 0.0
-            fy = 0.0
-            fz = 0.0
-            gx = 0.0
-            gy = 0.0
-            gz = 0.0
-            if i < nx - 1:
-                s = j * (nx - 1) + i
-                fx = t_seg[0, s]
-                fy = t_seg[1, s]
-                fz = t_seg[2, s]
+            sr = j * (nx - 1) + i
+            su = nw + n
+            fx = tx[sr] if i < nx - 1 else 0.0
+            fy = ty[sr] if i < nx - 1 else 0.0
+            fz = tz[sr] if i < nx - 1 else 0.0
             if i > 0:
-                s = j * (nx - 1) + i - 1
-                fx = fx - t_seg[0, s]
-                fy = fy - t_seg[1, s]
-                fz = fz - t_seg[2, s]
-            if j < ny - 1:
-                s = nw + n
-                gx = t_seg[0, s]
-                gy = t_seg[1, s]
-                gz = t_seg[2, s]
+                fx = fx - tx[sr - 1]
+                fy = fy - ty[sr - 1]
+                fz = fz - tz[sr - 1]
+            gx = tx[su] if j < ny - 1 else 0.0
+            gy = ty[su] if j < ny - 1 else 0.0
+            gz = tz[su] if j < ny - 1 else 0.0
             if j > 0:
-                s = nw + n - nx
-                gx = gx - t_seg[0, s]
-                gy = gy - t_seg[1, s]
-                gz = gz - t_seg[2, s]
+                gx = gx - tx[su - nx]
+                gy = gy - ty[su - nx]
+                gz = gz - tz[su - nx]
             m = mass[n]
-            fx = fx + gx + m * grav[0]
-            fy = fy + gy + m * grav[1]
-            fz = fz + gz + m * grav[2]
             q = charge[n] if in_field(xk[2, n], region, z0) else 0.0
-            # electric part, eq. 2.7
-            fx += q * ex
-            fy += q * ey
-            fz += q * ez
+            # electric part of eq. 2.7 and gravity
+            fx = fx + gx + (m * grav[0] + q * ex)
+            fy = fy + gy + (m * grav[1] + q * ey)
+            fz = fz + gz + (m * grav[2] + q * ez)
             h = dt * im
             ax = v0[0, n] + h * (phi * fx + (1.0 - phi) * f0[0, n])
             ay = v0[1, n] + h * (phi * fy + (1.0 - phi) * f0[1, n])

@@ -2,6 +2,8 @@
 
 The tension vector of segment s is the force its first node feels, t_s = (S·A0/L0)·d with
 d = x_b − x_a: from ψ = U·S·A0 along d/L and U = L/L0, so no square root is needed for the force.
+Segments are numbered warp first (s = j·(nx−1) + i joins nodes a = j·nx + i and a + 1), then
+fill (s = warp_count + a joins a and a + nx); both loops run over contiguous memory.
 """
 
 import math
@@ -12,29 +14,39 @@ MATERIAL_FUNG = 1
 
 
 @njit(cache=True, inline="always")
-def _tension(x, a, b, s, alpha_c, coef, inv_l02, kind, fung_h, u_crit, rate, t_out, alpha_out):
-    dx = x[0, b] - x[0, a]
-    dy = x[1, b] - x[1, a]
-    dz = x[2, b] - x[2, a]
-    u2 = (dx * dx + dy * dy + dz * dz) * inv_l02[s]
-    alpha = alpha_c[s]
-    # damage, eq. 2.6: irreversible, only past the critical stretch
-    if u2 > u_crit * u_crit and rate > 0.0:
-        trial = math.exp(-rate * (math.sqrt(u2) - u_crit) / u_crit)
-        if trial < alpha:
-            alpha = trial
-    alpha_out[s] = alpha
-    c = 0.0
-    # relaxed law: no stress in compression (U <= 1)
-    if u2 > 1.0:
-        e = 0.5 * (u2 - 1.0)
-        if kind == MATERIAL_FUNG:
-            c = alpha * coef[s] * fung_h * e * math.exp(0.5 * fung_h * e * e)
-        else:
-            c = alpha * coef[s] * e
-    t_out[0, s] = c * dx
-    t_out[1, s] = c * dy
-    t_out[2, s] = c * dz
+def _stress_factor(u2, kind, fung_h):
+    """S/𝔼 (KSV) or S/c (Fung) at stretch² u2, relaxed: 0 for U ≤ 1."""
+    e = 0.5 * max(u2 - 1.0, 0.0)
+    if kind == MATERIAL_FUNG:
+        return fung_h * e * math.exp(0.5 * fung_h * e * e)
+    return e
+
+
+@njit(cache=True)
+def _family(x, first, count, step, sbase, alpha_c, coef, inv_l02, kind, fung_h, u_crit, rate,
+            t_out, alpha_out):
+    """Tensions of `count` consecutive segments s = sbase + k joining a = first + k, a + step."""
+    xx, xy, xz = x[0], x[1], x[2]
+    tx, ty, tz = t_out[0], t_out[1], t_out[2]
+    uc2 = u_crit * u_crit
+    for k in range(count):
+        a = first + k
+        b = a + step
+        s = sbase + k
+        dx = xx[b] - xx[a]
+        dy = xy[b] - xy[a]
+        dz = xz[b] - xz[a]
+        u2 = (dx * dx + dy * dy + dz * dz) * inv_l02[s]
+        alpha = alpha_c[s]
+        # damage, eq. 2.6: irreversible, only past the critical stretch
+        if u2 > uc2 and rate > 0.0:
+            trial = math.exp(-rate * (math.sqrt(u2) - u_crit) / u_crit)
+            alpha = min(alpha, trial)
+        alpha_out[s] = alpha
+        c = alpha * coef[s] * _stress_factor(u2, kind, fung_h)
+        tx[s] = c * dx
+        ty[s] = c * dy
+        tz[s] = c * dz
 
 
 @njit(cache=True)
@@ -43,15 +55,10 @@ def yarn_tensions(x, nx, ny, alpha_c, coef, inv_l02, kind, fung_h, u_crit, rate,
     """Tension vectors t_out (3, seg_count) [N] and trial damage alpha_out at positions x."""
     nw = ny * (nx - 1)
     for j in range(ny):
-        for i in range(nx - 1):
-            a = j * nx + i
-            _tension(x, a, a + 1, j * (nx - 1) + i, alpha_c, coef, inv_l02, kind, fung_h,
-                     u_crit, rate, t_out, alpha_out)
-    for j in range(ny - 1):
-        for i in range(nx):
-            a = j * nx + i
-            _tension(x, a, a + nx, nw + a, alpha_c, coef, inv_l02, kind, fung_h, u_crit, rate,
-                     t_out, alpha_out)
+        _family(x, j * nx, nx - 1, 1, j * (nx - 1), alpha_c, coef, inv_l02, kind, fung_h,
+                u_crit, rate, t_out, alpha_out)
+    _family(x, 0, (ny - 1) * nx, nx, nw, alpha_c, coef, inv_l02, kind, fung_h, u_crit, rate,
+            t_out, alpha_out)
 
 
 @njit(cache=True)

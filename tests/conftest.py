@@ -1,0 +1,29 @@
+"""Shared helpers: small scenarios built from the defaults with dotted overrides."""
+
+from __future__ import annotations
+
+import pytest
+
+from emfabric.scenario import Scenario
+
+
+def make(**dotted) -> Scenario:
+    """The default scenario with dotted-key overrides (keys with '.' passed via **{...})."""
+    return Scenario().replace(**dotted)
+
+
+def fabric_only(**dotted) -> Scenario:
+    """A field-actuated fabric without projectile, no damage, no modulus scatter."""
+    base = {
+        "projectile.shape": "none",
+        "fabric.material.modulus_cv": 0.0,
+        "fabric.damage.rate": 0.0,
+        "field.B": [0.0, 0.0, 0.0],
+    }
+    base.update(dotted)
+    return Scenario().replace(**base)
+
+
+@pytest.fixture
+def tmp_run_dir(tmp_path):
+    return tmp_path / "run"

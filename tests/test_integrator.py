@@ -1,0 +1,152 @@
+"""Time integration (section 3): order of the φ-scheme, energy under B, step control, damage."""
+
+import math
+
+import numpy as np
+import pytest
+
+from emfabric.builder import build_model
+from emfabric.integrator import DivergenceError, Integrator, step_factor
+from emfabric.run import run
+
+from conftest import fabric_only
+
+
+def _prestretched(phi, dt, **kw):
+    """A clamped 6×6 sheet pre-stretched by 2 % with an out-of-plane velocity bump: every yarn
+    stays in tension, so the problem is smooth (no relaxed-law kink, no damage)."""
+    sc = fabric_only(**{
+        "fabric.nodes": [6, 6], "fabric.size": [0.05, 0.05], "solver.phi": phi,
+        "solver.adaptive": False, "solver.dt_max": dt, "solver.tolerance": 1e-11,
+        "solver.max_iterations": 400, **kw,
+    })
+    model = build_model(sc)
+    s = model.state()
+    s.node_x[:2] *= 1.02
+    r2 = (model.node_x0[0] ** 2 + model.node_x0[1] ** 2) / 0.02**2
+    s.node_v[2] = 40.0 * np.exp(-r2) * (model.node_inv_mass > 0)
+    from emfabric.integrator import initial_forces
+
+    initial_forces(model, s)
+    return model, s
+
+
+def _solve(phi, dt, t_end=4e-6, **kw):
+    model, s = _prestretched(phi, dt, **kw)
+    integ = Integrator(model)
+    s2 = s.copy()
+    for _ in range(round(t_end / dt)):
+        integ.step(s, s2)
+        s, s2 = s2, s
+    return s.node_x.copy()
+
+
+@pytest.mark.parametrize("phi,order", [(0.5, 2.0), (1.0, 1.0)])
+def test_convergence_order(phi, order):
+    """φ = 0.5 is second order in Δt, φ = 1 first order (fixed step, smooth problem)."""
+    dts = [8e-8, 4e-8, 2e-8]
+    ref = _solve(phi, 2.5e-9)
+    errs = [np.abs(_solve(phi, dt) - ref).max() for dt in dts]
+    rates = [math.log2(errs[i] / errs[i + 1]) for i in range(2)]
+    assert all(abs(r - order) < 0.25 for r in rates), (errs, rates)
+
+
+def _energy_drift(dt):
+    sc = fabric_only(**{
+        "fabric.nodes": [7, 7], "fabric.size": [0.05, 0.05], "fabric.velocity": [0, 0, 200.0],
+        "field.B": [0.3, -0.2, 0.5], "fabric.charge_per_node": 0.5, "solver.adaptive": False,
+        "solver.dt_max": dt, "solver.tolerance": 1e-12, "solver.max_iterations": 400,
+        "solver.end_time": 10e-6,
+    })
+    ds = run(sc).history
+    total = (ds.kinetic_energy_fabric + ds.strain_energy).values
+    return np.abs(total - total[0]).max() / total[0], ds
+
+
+def test_magnetic_force_does_no_work():
+    """A clamped sheet released with a velocity in pure B keeps KE + strain energy to O(Δt²)."""
+    e1, ds = _energy_drift(4e-8)
+    e2, _ = _energy_drift(2e-8)
+    # the yarns really work: part of the kinetic energy goes into strain
+    assert float(ds.strain_energy.max()) > 0.05 * float(ds.kinetic_energy_fabric[0])
+    assert e1 < 1e-3
+    assert e1 / e2 > 3.0  # second order: halving Δt quarters the drift
+    assert float(np.abs(ds.work_field).max()) == 0.0  # E = 0: the field does no work
+
+
+def test_step_factor_formula():
+    """Φ_K of eq. 3.9 with ϖ_0 = 1: shrink when K_d is exceeded, grow when met early."""
+    tol, kd, p = 1e-6, 6, 2.0
+    assert step_factor(1e-6, 6, tol, kd, p) == pytest.approx(1.0)
+    assert step_factor(1e-8, 3, tol, kd, p) > 1.0
+    assert step_factor(1e-3, 6, tol, kd, p) < 1.0
+    assert step_factor(1e-3, 6, tol, kd, p) == pytest.approx((tol / 1e-3) ** (1 / 12))
+
+
+def _paper_sheet(**kw):
+    """A 16×16 patch with the paper's node spacing and node mass (its stiffness/mass ratio)."""
+    h = 0.254 / 99
+    return fabric_only(**{"fabric.nodes": [16, 16], "fabric.size": [15 * h, 15 * h],
+                          "fabric.velocity": [0, 0, 50.0], **kw})
+
+
+def test_controller_shrinks_then_settles():
+    """Starting at Δt = 1e-6 s (no contraction on Zylon yarns) the controller rejects and shrinks
+    Δt; every accepted step meets TOL within K_d iterations."""
+    sc = _paper_sheet(**{"solver.end_time": 2e-6})
+    ds = run(sc).history
+    assert int(ds.rejected_steps[-1]) > 0
+    assert float(ds.dt[1:].max()) < 1e-6
+    assert int(ds.iterations[1:].max()) <= 6
+    assert float(ds.error[1:].max()) <= 1e-6
+
+
+def test_controller_grows_small_steps():
+    """A step far below what the iteration needs is grown (fewer than K_d iterations)."""
+    sc = _paper_sheet(**{"solver.end_time": 0.5e-6, "solver.dt_initial": 1e-10})
+    ds = run(sc).history
+    dt = ds.dt.values[1:]
+    assert dt[0] == pytest.approx(1e-10)
+    assert dt[-1] > 10 * dt[0]
+    assert int(ds.iterations[1]) < 6
+
+
+def test_dt_min_stops_with_a_clear_error():
+    """A step that cannot converge even at dt_min stops with time, Δt and the largest force."""
+    sc = _paper_sheet(**{"solver.dt_min": 5e-7, "solver.end_time": 2e-6})
+    with pytest.raises(DivergenceError) as info:
+        run(sc)
+    msg = str(info.value)
+    assert "t = 0 s" in msg and "dt_min" in msg and "largest force" in msg
+    assert info.value.result.status == "diverged"
+
+
+def test_damage_is_monotone_and_rejected_steps_leave_it():
+    """Damage never heals, and a rejected attempt (which over-stretches) does not commit α."""
+    sc = _paper_sheet(**{"fabric.velocity": [0, 0, 400.0], "fabric.damage.rate": 30.0,
+                         "fabric.damage.critical_stretch": 1.005, "solver.end_time": 3e-6,
+                         "output.snapshot_interval": 0.2e-6})
+    res = run(sc)
+    assert int(res.history.rejected_steps[-1]) > 0
+    assert float(res.history.min_damage[-1]) < 0.9
+    model = res.model
+    # replay: every accepted step's α equals the damage law at the accepted positions
+    s = model.state()
+    integ = Integrator(model)
+    s2 = s.copy()
+    prev = s.seg_alpha.copy()
+    uc, lam = 1.005, 30.0
+    a, b = model.seg_nodes.T
+    for _ in range(40):
+        info = integ.step(s, s2)
+        s, s2 = s2, s
+        assert np.all(s.seg_alpha <= prev)
+        u = np.linalg.norm(s.node_x[:, b] - s.node_x[:, a], axis=0) / model.seg_rest_length
+        law = np.minimum(prev, np.where(u > uc, np.exp(-lam * (u - uc) / uc), 1.0))
+        # α is committed from the last force evaluation of the accepted attempt (within TOL)
+        assert np.allclose(s.seg_alpha, law, atol=1e-4)
+        prev = s.seg_alpha.copy()
+        if info.rejected:
+            break
+    else:
+        pytest.fail("expected at least one rejected attempt in the replay")

@@ -1,0 +1,94 @@
+"""Constitutive laws (2.3–2.5, section 6) and the damage law (2.6) at known stretches."""
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from emfabric._kernels.yarn import MATERIAL_FUNG, yarn_tensions
+
+E_MOD, A0, L0 = 126e9, math.pi * 0.000185**2, 0.01
+
+
+def _pair_tension(stretch, kind=0, fung_h=0.0, modulus=E_MOD, alpha=1.0, u_crit=1.03,
+                  rate=0.0):
+    """Tension on node 0 of a 2×2 grid whose bottom warp segment has the given stretch."""
+    x = np.zeros((3, 4))
+    x[0] = [0.0, stretch * L0, 0.0, L0]  # segment 0 joins nodes 0 and 1
+    x[1] = [0.0, 0.0, L0, L0]
+    coef = np.full(4, modulus * A0 / L0)
+    t = np.empty((3, 4))
+    a_out = np.empty(4)
+    yarn_tensions(x, 2, 2, np.full(4, alpha), coef, np.full(4, 1 / L0**2), kind, fung_h,
+                  u_crit, rate, t, a_out)
+    return t[:, 0], a_out[0]
+
+
+@pytest.mark.parametrize("u", [1.001, 1.02, 1.05, 1.3])
+def test_ksv_force_at_known_stretch(u):
+    """ψ = U·S·A0 with S = 𝔼 (U²−1)/2, pulling node 0 towards node 1 (eq. 2.4)."""
+    t, _ = _pair_tension(u)
+    expected = u * E_MOD * (u * u - 1) / 2 * A0
+    assert t[0] == pytest.approx(expected, rel=1e-12)
+    assert t[1] == 0.0 and t[2] == 0.0
+
+
+@pytest.mark.parametrize("u", [0.5, 0.9, 0.999999, 1.0])
+def test_no_force_in_compression(u):
+    """The relaxed law carries no compression: S = 0 for U ≤ 1."""
+    t, _ = _pair_tension(u)
+    assert np.all(t == 0.0)
+
+
+@pytest.mark.parametrize("u", [1.01, 1.1])
+def test_fung_force_at_known_stretch(u):
+    """Fung (section 6): S = c·H·E·exp(H E²/2)."""
+    c, h = 2e8, 50.0
+    t, _ = _pair_tension(u, kind=MATERIAL_FUNG, fung_h=h, modulus=c)
+    e = (u * u - 1) / 2
+    assert t[0] == pytest.approx(u * c * h * e * math.exp(h * e * e / 2) * A0, rel=1e-12)
+
+
+@pytest.mark.parametrize("u,rate", [(1.02, 0.1), (1.06, 0.1), (1.06, 50.0), (1.5, 2.0)])
+def test_damage_law(u, rate):
+    """α = min(α_prev, exp(−λ (U − U_crit)/U_crit)) scales the stress (eqs. 2.5–2.6)."""
+    t, alpha = _pair_tension(u, rate=rate, alpha=0.97)
+    law = min(0.97, math.exp(-rate * (u - 1.03) / 1.03))
+    assert alpha == pytest.approx(law, rel=1e-14)
+    assert t[0] == pytest.approx(law * u * E_MOD * (u * u - 1) / 2 * A0, rel=1e-12)
+
+
+def test_paper_damage_rate_is_gentle():
+    """With the paper's λ = 0.1, a yarn at 6 % strain keeps α ≈ 0.997 (reported, not tuned)."""
+    _, alpha = _pair_tension(1.06, rate=0.1)
+    assert alpha == pytest.approx(math.exp(-0.1 * 0.03 / 1.03), rel=1e-14)
+    assert alpha > 0.99
+
+
+def _reference_tensions(x, nx, ny, coef, inv_l02, alpha_c):
+    """Plain-NumPy reference of the kernel (KSV, no damage)."""
+    idx = np.arange(nx * ny).reshape(ny, nx)
+    a = np.concatenate([idx[:, :-1].ravel(), idx[:-1, :].ravel()])
+    b = np.concatenate([idx[:, 1:].ravel(), idx[1:, :].ravel()])
+    d = x[:, b] - x[:, a]
+    u2 = (d * d).sum(axis=0) * inv_l02
+    s = alpha_c * coef * np.maximum(u2 - 1, 0) / 2
+    return s * d
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(2, 7), st.integers(2, 7), st.integers(0, 2**32 - 1))
+def test_kernel_matches_numpy_reference(nx, ny, seed):
+    """The grid kernel equals a plain-NumPy segment loop on random positions."""
+    rng = np.random.default_rng(seed)
+    n, s = nx * ny, ny * (nx - 1) + (ny - 1) * nx
+    x = rng.normal(size=(3, n)) * 0.01
+    coef = rng.uniform(1e5, 1e7, s)
+    inv_l02 = 1 / rng.uniform(0.001, 0.01, s) ** 2
+    alpha = rng.uniform(0.2, 1.0, s)
+    t = np.empty((3, s))
+    yarn_tensions(x, nx, ny, alpha, coef, inv_l02, 0, 0.0, 10.0, 0.0, t, np.empty(s))
+    assert np.allclose(t, _reference_tensions(x, nx, ny, coef, inv_l02, alpha), rtol=1e-12,
+                       atol=0)
