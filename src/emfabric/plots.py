@@ -39,7 +39,6 @@ STYLE = {
     "grid.alpha": 0.3,
     "lines.linewidth": 1.4,
     "savefig.dpi": 150,
-    "pdf.fonttype": 42,
 }
 """Matplotlib settings every figure is drawn and saved with."""
 
@@ -147,18 +146,23 @@ def _num(v: object) -> str:
     return f"{v:g}" if isinstance(v, int | float) and not isinstance(v, bool) else str(v)
 
 
+def _math(symbol: str, sub: str) -> str:
+    if not sub:
+        return f"${symbol}$"
+    return f"${symbol}_{sub}$" if len(sub) == 1 else f"${symbol}_{{{sub}}}$"
+
+
 def pretty_setting(key: str, value: object) -> str:
     """One scenario setting as a legend entry, e.g. ``field.B = [0.05, 0, 0]`` -> ``$B_x$ = 0.05 T``."""
     if key in _VECTORS and isinstance(value, list) and len(value) == 3:
         sym, sub, unit = _VECTORS[key]
         nonzero = [i for i, v in enumerate(value) if v != 0]
-        if not nonzero:
-            return f"${sym}_{{{sub}}}$ = 0" if sub else f"${sym}$ = 0"
         if len(nonzero) == 1:
             i = nonzero[0]
-            return f"${sym}_{{{sub}{'xyz'[i]}}}$ = {_num(value[i])} {unit}"
-        sym = f"${sym}_{{{sub}}}$" if sub else f"${sym}$"
-        return f"{sym} = ({', '.join(_num(v) for v in value)}) {unit}"
+            return f"{_math(sym, sub + 'xyz'[i])} = {_num(value[i])} {unit}"
+        if not nonzero:
+            return f"{_math(sym, sub)} = 0"
+        return f"{_math(sym, sub)} = ({', '.join(_num(v) for v in value)}) {unit}"
     if key == "fabric.nodes" and isinstance(value, list) and len(value) == 2:
         return f"{value[0]} × {value[1]} nodes"
     if key in _SCALARS:

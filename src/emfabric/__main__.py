@@ -1,0 +1,5 @@
+"""python -m emfabric: the command line."""
+
+from emfabric.cli import main
+
+main()

@@ -1,0 +1,116 @@
+"""Outputs: history.nc contract, snapshots, ParaView files, partial runs, determinism."""
+
+import subprocess
+import sys
+import tomllib
+
+import numpy as np
+import pytest
+import xarray as xr
+
+from emfabric import __version__
+from emfabric.io.history import VARIABLES
+from emfabric.run import run
+
+from conftest import make
+
+SMALL = {
+    "fabric.nodes": [13, 13], "fabric.rescale": True, "solver.end_time": 6e-6,
+    "output.snapshot_interval": 2e-6, "projectile.gap": 0.0,
+}
+
+
+@pytest.fixture(scope="module")
+def small_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("run")
+    return run(make(**SMALL), out), out
+
+
+def test_history_contract(small_run):
+    """history.nc has MODEL §7's variables with units, the version and the full scenario."""
+    res, out = small_run
+    ds = xr.open_dataset(out / "history.nc")
+    required = ["dt", "iterations", "projectile_position", "projectile_velocity",
+                "angular_velocity", "tilt", "contact_nodes", "max_deflection", "max_stretch",
+                "fabric_momentum", "kinetic_energy_projectile", "kinetic_energy_fabric",
+                "strain_energy", "broken_yarns", "min_damage"]
+    for name in required + list(VARIABLES):
+        assert name in ds, name
+        assert "units" in ds[name].attrs
+    assert ds.projectile_position.dims == ("time", "xyz")
+    assert ds.time.attrs["units"] == "s"
+    assert ds.attrs["emfabric_version"] == __version__
+    assert ds.attrs["status"] == "complete"
+    scenario = tomllib.loads(ds.attrs["scenario"])
+    assert scenario["fabric"]["nodes"] == [13, 13]
+    assert scenario["solver"]["tolerance"] == 1e-6  # defaults written out too
+    assert int(ds.contact_nodes.max()) > 0
+    assert float(ds.time[-1]) == pytest.approx(6e-6)
+
+
+def test_snapshots_and_paraview(small_run):
+    """Snapshots hold positions, velocities and damage; the .pvd collections list the VTU files."""
+    res, out = small_run
+    snap = xr.open_dataset(out / "snapshots.nc")
+    assert snap.sizes["snapshot"] == 4  # t = 0, 2, 4, 6 µs
+    assert snap.node_position.shape == (4, 169, 3)
+    assert snap.yarn_damage.shape == (4, res.model.seg_count)
+    np.testing.assert_array_equal(snap.node_position[-1].values, res.state.node_x.T)
+    pvd = (out / "fabric.pvd").read_text()
+    assert pvd.count("<DataSet") == 4
+    import meshio
+
+    mesh = meshio.read(out / "vtk" / "fabric_00003.vtu")
+    assert mesh.points.shape == (169, 3)
+    assert "damage" in mesh.cell_data and "velocity" in mesh.point_data
+    assert (out / "projectile.pvd").exists()
+
+
+def test_same_seed_same_history():
+    """Same scenario and seed ⇒ bit-identical history; another seed ⇒ another fabric."""
+    a = run(make(**SMALL)).history
+    b = run(make(**SMALL)).history
+    for name in VARIABLES:
+        np.testing.assert_array_equal(a[name].values, b[name].values)
+    c = run(make(**{**SMALL, "fabric.material.seed": 7})).history
+    assert not np.array_equal(a.angular_velocity.values, c.angular_velocity.values)
+
+
+def test_interrupt_leaves_partial_history(tmp_path):
+    """Ctrl-C mid-run leaves a readable history marked partial, with the steps done so far."""
+    calls = []
+
+    def progress(state, info):
+        calls.append(state.t)
+        if len(calls) == 5:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run(make(**SMALL), tmp_path, progress=progress)
+    ds = xr.open_dataset(tmp_path / "history.nc")
+    assert ds.attrs["status"] == "partial"
+    assert "interrupted" in ds.attrs["end_reason"]
+    assert ds.sizes["time"] == 6
+    assert xr.open_dataset(tmp_path / "snapshots.nc").sizes["snapshot"] >= 2
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_cli_run_validate_scenarios(tmp_path):
+    """The command line runs a scenario with overrides and prints a summary; errors exit 2."""
+    exe = [sys.executable, "-m", "emfabric"]
+    r = subprocess.run(exe + ["scenarios"], capture_output=True, text=True)
+    assert r.returncode == 0 and "paper-field" in r.stdout
+    r = subprocess.run(exe + ["validate", "paper-spin"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    r = subprocess.run(exe + ["validate", "paper-spin", "--set", "solver.phi=2"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and "solver.phi" in r.stderr
+    args = ["run", "demo-small", "--out", str(tmp_path / "d"), "-q", "--json",
+            "--set", "fabric.nodes=[10,10]", "--set", "solver.end_time=3e-6"]
+    r = subprocess.run(exe + args, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    import json
+
+    summary = json.loads(r.stdout)
+    assert summary["status"] == "complete" and summary["steps"] > 0
+    assert (tmp_path / "d" / "history.nc").exists()
