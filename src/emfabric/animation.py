@@ -115,8 +115,8 @@ class _GifWriter:
         palette = "split[a][b];[a]palettegen=stats_mode=single[p];[b][p]paletteuse=new=1"
         self._w = imageio_ffmpeg.write_frames(
             str(self.tmp), self.size, fps=fps, codec="gif", pix_fmt_out="pal8", quality=None,
-            macro_block_size=1, ffmpeg_log_level="error", output_params=["-filter_complex", palette, "-loop", "0",
-                                               "-f", "gif"])
+            macro_block_size=1, ffmpeg_log_level="error",
+            output_params=["-filter_complex", palette, "-loop", "0", "-f", "gif"])
         self._w.send(None)
 
     def append(self, frame: np.ndarray) -> None:

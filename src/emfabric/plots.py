@@ -153,7 +153,7 @@ def _math(symbol: str, sub: str) -> str:
 
 
 def pretty_setting(key: str, value: object) -> str:
-    """One scenario setting as a legend entry, e.g. ``field.B = [0.05, 0, 0]`` -> ``$B_x$ = 0.05 T``."""
+    """One scenario setting as a legend entry: ``field.B = [0.05, 0, 0]`` -> ``$B_x$ = 0.05 T``."""
     if key in _VECTORS and isinstance(value, list) and len(value) == 3:
         sym, sub, unit = _VECTORS[key]
         nonzero = [i for i, v in enumerate(value) if v != 0]

@@ -49,6 +49,21 @@ def _nodes_inside(x, inv_mass, flag, centre, radius):
 
 
 @njit(cache=True)
+def fabric_iterate(grid, fab, mat, fld, prev, x0, v0, f0, alpha_c, skip_err, cur, v1, f1,
+                   alpha_t, t_seg, err_rows, phi, dt):
+    """One force evaluation + node update: yarn tensions and damage at the iterate `prev`, then
+    the φ-update of every node into (cur, v1, f1) with per-row error sums."""
+    nx, ny = grid
+    mass, inv_mass, charge, coef, inv_l02 = fab
+    kind, fung_h, u_crit, rate = mat
+    efield, bfield, region, z0, grav = fld
+    yarn_tensions(prev, nx, ny, alpha_c, coef, inv_l02, kind, fung_h, u_crit, rate, t_seg,
+                  alpha_t)
+    node_update(prev, x0, v0, f0, t_seg, nx, ny, mass, inv_mass, charge, phi, dt, efield,
+                bfield, region, z0, grav, skip_err, cur, v1, f1, err_rows)
+
+
+@njit(cache=True)
 def attempt_step(grid, fab, mat, fld, body, sin, sout, work, phi, dt, tol, kmax):
     """Iterate the coupled step to ϖ_K ≤ tol within kmax iterations.
 
@@ -89,10 +104,8 @@ def attempt_step(grid, fab, mat, fld, body, sin, sout, work, phi, dt, tol, kmax)
     for k in range(1, kmax + 1):
         prev = xbuf if k % 2 == 1 else x1
         cur = x1 if k % 2 == 1 else xbuf
-        yarn_tensions(prev, nx, ny, alpha_c, coef, inv_l02, kind, fung_h, u_crit, rate, t_seg,
-                      alpha_t)
-        node_update(prev, x0, v0, f0, t_seg, nx, ny, mass, inv_mass, charge, phi, dt, efield,
-                    bfield, region, z0, grav, flag, cur, v1, f1, err_rows)
+        fabric_iterate(grid, fab, mat, fld, prev, x0, v0, f0, alpha_c, flag, cur, v1, f1,
+                       alpha_t, t_seg, err_rows, phi, dt)
         num_b = 0.0
         den_b = 0.0
         if has_body:
