@@ -32,6 +32,7 @@ from emfabric.plots import (
     scene_limits,
     snapshot_tilt_deg,
     status_note,
+    yarn_linewidth,
 )
 
 log = logging.getLogger(__name__)
@@ -64,9 +65,10 @@ def render_frames(snapshots: xr.Dataset, history: xr.Dataset | None = None,
     with matplotlib.rc_context(STYLE):
         fig = new_figure((size[0] / dpi, size[1] / dpi), layout=None)
         fig.set_dpi(dpi)
-        ax = fig.add_axes((0.0, 0.0, 0.88, 0.9), projection="3d")
-        view = SheetView(ax, snapshots, norm, limits, linewidth=0.9, zoom=1.2)
-        damage_colourbar(fig, norm, fig.add_axes((0.885, 0.2, 0.02, 0.6)))
+        ax = fig.add_axes((-0.06, -0.06, 0.9, 1.0), projection="3d")
+        view = SheetView(ax, snapshots, norm, limits,
+                         linewidth=yarn_linewidth(snapshots, scale=1.3))
+        damage_colourbar(fig, norm, fig.add_axes((0.81, 0.2, 0.02, 0.6)))
         title = fig.suptitle("")
     for k in range(count):
         t = float(snapshots["time"][k]) * 1e6

@@ -79,8 +79,8 @@ class Integrator:
                      m.body_charge, sc.contact.static_friction, sc.contact.dynamic_friction)
         self.work = (
             np.empty((3, n)),  # second iterate buffer
-            np.empty((3, s)),  # segment tension vectors
-            np.empty((2, m.ny)),  # per-row error sums
+            np.empty((9, m.nx + 1)),  # row buffers of yarn tensions
+            (np.empty((2, m.ny)), np.empty(n), np.empty(n)),  # error sums: per row, per node
             np.empty(n, dtype=np.int64),  # contact candidates
             np.zeros(n, dtype=np.uint8),  # candidate flags
             np.empty(n, dtype=np.int64),  # contact nodes
@@ -183,7 +183,8 @@ def initial_forces(model: Model, state: State) -> None:
     node_update(state.node_x, state.node_x, state.node_v, np.zeros_like(state.node_f), t_seg,
                 m.nx, m.ny, m.node_mass, m.node_inv_mass, m.node_charge, 1.0, 0.0, m.field_E,
                 m.field_B, m.field_region, m.field_z0, m.gravity,
-                np.ones(m.node_count, dtype=np.uint8), x1, v1, state.node_f, np.empty((2, m.ny)))
+                np.ones(m.node_count, dtype=np.uint8), x1, v1, state.node_f, np.empty((2, m.ny)),
+                np.empty(m.node_count), np.empty(m.node_count))
     if m.has_body:
         b = state.body
         field_wrench(b[BODY_X], b[BODY_V], b[BODY_W], b[BODY_R0:BODY_R0 + 3], m.body_charge_pos,

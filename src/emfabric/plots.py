@@ -437,6 +437,12 @@ def scene_limits(snapshots: xr.Dataset, indices: Sequence[int]) -> np.ndarray:
     return np.stack([lo - pad, hi + pad], axis=1)
 
 
+def yarn_linewidth(snapshots: xr.Dataset, scale: float = 1.0) -> float:
+    """Yarn line width [pt]: thinner on finer grids, so a 100 x 100 sheet does not fill in."""
+    n = max(int(snapshots.attrs.get("grid_nx", 30)), int(snapshots.attrs.get("grid_ny", 30)))
+    return scale * float(np.clip(24.0 / n, 0.2, 0.9))
+
+
 def _unit_sphere(n_lat: int = 9, n_lon: int = 17) -> np.ndarray:
     """Points of a latitude-longitude grid on the unit sphere, shape (3, n_lat, n_lon)."""
     th, ph = np.meshgrid(np.linspace(0, np.pi, n_lat), np.linspace(0, 2 * np.pi, n_lon),
@@ -449,8 +455,7 @@ class SheetView:
     wireframe sphere (turning with the body) and an arrow from its centre along the nose."""
 
     def __init__(self, ax, snapshots: xr.Dataset, norm: Normalize, limits: np.ndarray, *,
-                 linewidth: float = 0.8, elev: float = 22.0, azim: float = -60.0,
-                 zoom: float = 1.05):
+                 linewidth: float | None = None, elev: float = 22.0, azim: float = -60.0):
         self.ax = ax
         self.seg = snapshots["segment_nodes"].values.astype(np.int64)
         self.radius = float(snapshots.attrs.get("projectile_radius", 0.0))
@@ -459,6 +464,8 @@ class SheetView:
         self.nose = snapshots["projectile_nose_body"].values
         self._sphere = _unit_sphere().reshape(3, -1) * self.radius
         self._body_artists: list = []
+        if linewidth is None:
+            linewidth = yarn_linewidth(snapshots)
         ax.computed_zorder = False  # sheet first, then the projectile on top, always visible
         self.lines = Line3DCollection(np.zeros((len(self.seg), 2, 3)), cmap=DAMAGE_CMAP,
                                       norm=norm, linewidths=linewidth)
@@ -466,7 +473,7 @@ class SheetView:
         ax.set_xlim(*limits[0])
         ax.set_ylim(*limits[1])
         ax.set_zlim(*limits[2])
-        ax.set_box_aspect(tuple(limits[:, 1] - limits[:, 0]), zoom=zoom)
+        ax.set_box_aspect(tuple(limits[:, 1] - limits[:, 0]))  # zoom > 1 mis-draws the lines
         ax.view_init(elev=elev, azim=azim)
         for name, axis in zip("xyz", (ax.xaxis, ax.yaxis, ax.zaxis), strict=True):
             axis.set_major_locator(MaxNLocator(3))
@@ -509,6 +516,8 @@ def damage_colourbar(fig: Figure, norm: Normalize, cax) -> None:
     """The one colour bar of a figure: α over the range reached, red = least damaged."""
     bar = fig.colorbar(ScalarMappable(norm=norm, cmap=DAMAGE_CMAP), cax=cax)
     bar.set_label(DAMAGE_LABEL)
+    if norm.vmax - norm.vmin <= FLAT_RANGE * (1 + 1e-9):
+        bar.set_ticks([norm.vmin, norm.vmax])  # one α everywhere: just the ends
     bar.formatter.set_useOffset(False)
     bar.update_ticks()
 
@@ -534,9 +543,9 @@ def sequence_figure(snapshots: xr.Dataset, count: int = 6, history: xr.Dataset |
             t = float(snapshots["time"][k]) * _US
             ax.set_title(f"t = {t:.1f} µs,  Θ = {snapshot_tilt_deg(snapshots, k, history):.2f}°",
                          fontsize=10)
-        fig.subplots_adjust(left=0.0, right=0.9, bottom=0.02, top=0.88, wspace=0.02,
+        fig.subplots_adjust(left=0.0, right=0.86, bottom=0.02, top=0.88, wspace=0.02,
                             hspace=0.08)
-        damage_colourbar(fig, norm, fig.add_axes((0.915, 0.2, 0.015, 0.6)))
+        damage_colourbar(fig, norm, fig.add_axes((0.895, 0.2, 0.015, 0.6)))
         meta = history if history is not None else snapshots
         note = status_note(meta)
         head = title or f"{run_name(meta)}: impact sequence"

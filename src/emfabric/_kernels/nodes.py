@@ -4,6 +4,8 @@ import math
 
 from numba import njit
 
+from emfabric._kernels.yarn import segment_tension
+
 REGION_HALF_SPACE = 1
 
 
@@ -13,90 +15,179 @@ def in_field(z, region, z0):
     return region != REGION_HALF_SPACE or z < z0
 
 
+@njit(cache=True, inline="always")
+def _advance(n, fx, fy, fz, xk, x0, v0, f0, mass, inv_mass, charge, phi, dt, efield, bfield,
+             region, z0, grav, skip_err, x1, v1, f1, err_num, err_den):
+    """φ-update of node n given its yarn force (fx, fy, fz); branch-free so loops vectorise.
+
+    A fixed node has inv_mass = 0 and zero velocity, so it keeps x1 = x0 exactly.
+    """
+    m = mass[n]
+    q = charge[n] if in_field(xk[2, n], region, z0) else 0.0
+    # electric part of eq. 2.7 and gravity
+    fx = fx + (m * grav[0] + q * efield[0])
+    fy = fy + (m * grav[1] + q * efield[1])
+    fz = fz + (m * grav[2] + q * efield[2])
+    h = dt * inv_mass[n]
+    ax = v0[0, n] + h * (phi * fx + (1.0 - phi) * f0[0, n])
+    ay = v0[1, n] + h * (phi * fy + (1.0 - phi) * f0[1, n])
+    az = v0[2, n] + h * (phi * fz + (1.0 - phi) * f0[2, n])
+    # magnetic part implicit in v1: v1 − v1 × u = a with u = φΔt q B / m (solved exactly)
+    beta = phi * h * q
+    ux = beta * bfield[0]
+    uy = beta * bfield[1]
+    uz = beta * bfield[2]
+    au = ax * ux + ay * uy + az * uz
+    inv = 1.0 / (1.0 + ux * ux + uy * uy + uz * uz)
+    vx = (ax + (ay * uz - az * uy) + au * ux) * inv
+    vy = (ay + (az * ux - ax * uz) + au * uy) * inv
+    vz = (az + (ax * uy - ay * ux) + au * uz) * inv
+    v1[0, n] = vx
+    v1[1, n] = vy
+    v1[2, n] = vz
+    f1[0, n] = fx + q * (vy * bfield[2] - vz * bfield[1])
+    f1[1, n] = fy + q * (vz * bfield[0] - vx * bfield[2])
+    f1[2, n] = fz + q * (vx * bfield[1] - vy * bfield[0])
+    px = x0[0, n] + dt * (phi * vx + (1.0 - phi) * v0[0, n])
+    py = x0[1, n] + dt * (phi * vy + (1.0 - phi) * v0[1, n])
+    pz = x0[2, n] + dt * (phi * vz + (1.0 - phi) * v0[2, n])
+    x1[0, n] = px
+    x1[1, n] = py
+    x1[2, n] = pz
+    # error measure terms (3.10 step 5a); contact candidates are measured after contact
+    keep = 1.0 - skip_err[n]
+    dx = px - xk[0, n]
+    dy = py - xk[1, n]
+    dz = pz - xk[2, n]
+    err_num[n] = keep * math.sqrt(dx * dx + dy * dy + dz * dz)
+    dx = px - x0[0, n]
+    dy = py - x0[1, n]
+    dz = pz - x0[2, n]
+    err_den[n] = keep * math.sqrt(dx * dx + dy * dy + dz * dz)
+
+
+@njit(cache=True, inline="always")
+def _edge_force(t, n, i, j, nx, ny, nw):
+    """Yarn force on a node of the sheet's border (missing neighbours contribute nothing)."""
+    sr = j * (nx - 1) + i
+    su = nw + n
+    f = t[sr] if i < nx - 1 else 0.0
+    if i > 0:
+        f = f - t[sr - 1]
+    g = t[su] if j < ny - 1 else 0.0
+    if j > 0:
+        g = g - t[su - nx]
+    return f + g
+
+
+@njit(cache=True, fastmath={"reassoc", "nsz"})
+def _row_sums(err_num, err_den, nx, ny, err_rows):
+    """Per-row sums of the error terms (only these sums may be reassociated)."""
+    for j in range(ny):
+        a = 0.0
+        b = 0.0
+        for i in range(j * nx, (j + 1) * nx):
+            a += err_num[i]
+            b += err_den[i]
+        err_rows[0, j] = a
+        err_rows[1, j] = b
+
+
 @njit(cache=True)
 def node_update(xk, x0, v0, f0, t_seg, nx, ny, mass, inv_mass, charge, phi, dt, efield, bfield,
-                region, z0, grav, skip_err, x1, v1, f1, err_rows):
+                region, z0, grav, skip_err, x1, v1, f1, err_rows, err_num, err_den):
     """One iterate of eqs. 3.2/A12-A13 for every node, forces evaluated at the iterate xk.
 
     v1 = v0 + Δt/m (φ ψ(t+Δt) + (1−φ) ψ(t)),  x1 = x0 + Δt (φ v1 + (1−φ) v0), with the Lorentz
     force q(E + v1 × B) implicit in v1 (solved exactly per node). Writes x1, v1, f1 (ψ(t+Δt)
-    without contact) and per-row sums of |x1 − xk| and |x1 − x0| (error measure 3.10-5a) for
-    nodes with skip_err == 0.
+    without contact) and per-row sums of |x1 − xk| and |x1 − x0| (error measure 3.10-5a) over
+    nodes with skip_err == 0. The yarn force is one difference per node and direction,
+    (t_right − t_left) + (t_up − t_down), which keeps mirror-symmetric states exactly symmetric.
     """
     nw = ny * (nx - 1)
-    ex, ey, ez = efield[0], efield[1], efield[2]
-    bx, by, bz = bfield[0], bfield[1], bfield[2]
     tx, ty, tz = t_seg[0], t_seg[1], t_seg[2]
     for j in range(ny):
-        num = 0.0
-        den = 0.0
+        border_row = j == 0 or j == ny - 1
         for i in range(nx):
-            n = j * nx + i
-            im = inv_mass[n]
-            if im == 0.0:
-                # fixed node: never moves
-                for c in range(3):
-                    x1[c, n] = x0[c, n]
-                    v1[c, n] = v0[c, n]
-                    f1[c, n] = 0.0
-                continue
-            # yarn forces: one difference per node and direction (mirror-exact assembly)
-            sr = j * (nx - 1) + i
+            if border_row or i == 0 or i == nx - 1:
+                n = j * nx + i
+                _advance(n, _edge_force(tx, n, i, j, nx, ny, nw),
+                         _edge_force(ty, n, i, j, nx, ny, nw),
+                         _edge_force(tz, n, i, j, nx, ny, nw), xk, x0, v0, f0, mass, inv_mass,
+                         charge, phi, dt, efield, bfield, region, z0, grav, skip_err, x1, v1, f1,
+                         err_num, err_den)
+        if border_row:
+            continue
+        # interior of the row: all four yarns exist
+        nb = j * nx
+        sb = j * (nx - 1)
+        for i in range(1, nx - 1):
+            n = nb + i
+            sr = sb + i
             su = nw + n
-            fx = tx[sr] if i < nx - 1 else 0.0
-            fy = ty[sr] if i < nx - 1 else 0.0
-            fz = tz[sr] if i < nx - 1 else 0.0
-            if i > 0:
-                fx = fx - tx[sr - 1]
-                fy = fy - ty[sr - 1]
-                fz = fz - tz[sr - 1]
-            gx = tx[su] if j < ny - 1 else 0.0
-            gy = ty[su] if j < ny - 1 else 0.0
-            gz = tz[su] if j < ny - 1 else 0.0
-            if j > 0:
-                gx = gx - tx[su - nx]
-                gy = gy - ty[su - nx]
-                gz = gz - tz[su - nx]
-            m = mass[n]
-            q = charge[n] if in_field(xk[2, n], region, z0) else 0.0
-            # electric part of eq. 2.7 and gravity
-            fx = fx + gx + (m * grav[0] + q * ex)
-            fy = fy + gy + (m * grav[1] + q * ey)
-            fz = fz + gz + (m * grav[2] + q * ez)
-            h = dt * im
-            ax = v0[0, n] + h * (phi * fx + (1.0 - phi) * f0[0, n])
-            ay = v0[1, n] + h * (phi * fy + (1.0 - phi) * f0[1, n])
-            az = v0[2, n] + h * (phi * fz + (1.0 - phi) * f0[2, n])
-            # magnetic part implicit in v1: v1 − v1 × u = a with u = φΔt q B / m
-            beta = phi * h * q
-            ux = beta * bx
-            uy = beta * by
-            uz = beta * bz
-            au = ax * ux + ay * uy + az * uz
-            inv = 1.0 / (1.0 + ux * ux + uy * uy + uz * uz)
-            vx = (ax + (ay * uz - az * uy) + au * ux) * inv
-            vy = (ay + (az * ux - ax * uz) + au * uy) * inv
-            vz = (az + (ax * uy - ay * ux) + au * uz) * inv
-            v1[0, n] = vx
-            v1[1, n] = vy
-            v1[2, n] = vz
-            f1[0, n] = fx + q * (vy * bz - vz * by)
-            f1[1, n] = fy + q * (vz * bx - vx * bz)
-            f1[2, n] = fz + q * (vx * by - vy * bx)
-            px = x0[0, n] + dt * (phi * vx + (1.0 - phi) * v0[0, n])
-            py = x0[1, n] + dt * (phi * vy + (1.0 - phi) * v0[1, n])
-            pz = x0[2, n] + dt * (phi * vz + (1.0 - phi) * v0[2, n])
-            x1[0, n] = px
-            x1[1, n] = py
-            x1[2, n] = pz
-            if skip_err[n] == 0:
-                dx = px - xk[0, n]
-                dy = py - xk[1, n]
-                dz = pz - xk[2, n]
-                num += math.sqrt(dx * dx + dy * dy + dz * dz)
-                dx = px - x0[0, n]
-                dy = py - x0[1, n]
-                dz = pz - x0[2, n]
-                den += math.sqrt(dx * dx + dy * dy + dz * dz)
-        err_rows[0, j] = num
-        err_rows[1, j] = den
+            fx = (tx[sr] - tx[sr - 1]) + (tx[su] - tx[su - nx])
+            fy = (ty[sr] - ty[sr - 1]) + (ty[su] - ty[su - nx])
+            fz = (tz[sr] - tz[sr - 1]) + (tz[su] - tz[su - nx])
+            _advance(n, fx, fy, fz, xk, x0, v0, f0, mass, inv_mass, charge, phi, dt, efield,
+                     bfield, region, z0, grav, skip_err, x1, v1, f1, err_num, err_den)
+    _row_sums(err_num, err_den, nx, ny, err_rows)
+
+
+@njit(cache=True)
+def fused_iterate(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind, fung_h,
+                  u_crit, rate, mass, inv_mass, charge, phi, dt, efield, bfield, region, z0, grav,
+                  skip_err, x1, v1, f1, err_rows, err_num, err_den, rowbuf):
+    """Yarn tensions at `prev` and the φ-update of every node, row by row.
+
+    The tensions of row j (warp) and between rows j and j+1 (fill) live in small row buffers
+    (rowbuf, shape (9, nx + 1)) and are consumed at once, so they never travel through memory.
+    Rest lengths are uniform per yarn family on the regular grid (inv_l02[0]: warp, inv_l02[-1]:
+    fill). Same arithmetic as yarn_tensions + the node force (t_R − t_L) + (t_U − t_D).
+    """
+    nw = ny * (nx - 1)
+    il_w = inv_l02[0]
+    il_f = inv_l02[inv_l02.shape[0] - 1]
+    xx, xy, xz = prev[0], prev[1], prev[2]
+    # padded warp row: twp[:, i + 1] is the tension of segment (i, i + 1), zeros at both ends
+    twp = rowbuf[0:3]
+    tu = rowbuf[3:6]
+    td = rowbuf[6:9]
+    twp[:, 0] = 0.0
+    twp[:, nx] = 0.0
+    td[:] = 0.0
+    for j in range(ny):
+        nb = j * nx
+        sb = j * (nx - 1)
+        for i in range(nx - 1):
+            a = nb + i
+            dx = xx[a + 1] - xx[a]
+            dy = xy[a + 1] - xy[a]
+            dz = xz[a + 1] - xz[a]
+            c, alpha_t[sb + i] = segment_tension(dx, dy, dz, il_w, alpha_c[sb + i], coef[sb + i],
+                                                 kind, fung_h, u_crit, rate)
+            twp[0, i + 1] = c * dx
+            twp[1, i + 1] = c * dy
+            twp[2, i + 1] = c * dz
+        if j < ny - 1:
+            for i in range(nx):
+                a = nb + i
+                s = nw + a
+                dx = xx[a + nx] - xx[a]
+                dy = xy[a + nx] - xy[a]
+                dz = xz[a + nx] - xz[a]
+                c, alpha_t[s] = segment_tension(dx, dy, dz, il_f, alpha_c[s], coef[s], kind,
+                                                fung_h, u_crit, rate)
+                tu[0, i] = c * dx
+                tu[1, i] = c * dy
+                tu[2, i] = c * dz
+        else:
+            tu[:, :nx] = 0.0
+        for i in range(nx):
+            # one difference per node and direction (mirror-exact assembly)
+            fx = (twp[0, i + 1] - twp[0, i]) + (tu[0, i] - td[0, i])
+            fy = (twp[1, i + 1] - twp[1, i]) + (tu[1, i] - td[1, i])
+            fz = (twp[2, i + 1] - twp[2, i]) + (tu[2, i] - td[2, i])
+            _advance(nb + i, fx, fy, fz, prev, x0, v0, f0, mass, inv_mass, charge, phi, dt,
+                     efield, bfield, region, z0, grav, skip_err, x1, v1, f1, err_num, err_den)
+        tu, td = td, tu
+    _row_sums(err_num, err_den, nx, ny, err_rows)

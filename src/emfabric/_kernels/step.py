@@ -13,9 +13,8 @@ from numba import njit
 
 from emfabric._kernels.body import body_update
 from emfabric._kernels.contact import find_candidates, sphere_contact
-from emfabric._kernels.nodes import node_update
+from emfabric._kernels.nodes import fused_iterate
 from emfabric._kernels.sums import fsum
-from emfabric._kernels.yarn import yarn_tensions
 
 CONVERGED, NOT_CONVERGED, NOT_FINITE, CONTACT_MISSED = 0, 1, 2, 3
 
@@ -50,17 +49,18 @@ def _nodes_inside(x, inv_mass, flag, centre, radius):
 
 @njit(cache=True)
 def fabric_iterate(grid, fab, mat, fld, prev, x0, v0, f0, alpha_c, skip_err, cur, v1, f1,
-                   alpha_t, t_seg, err_rows, phi, dt):
+                   alpha_t, t_seg, err, phi, dt):
     """One force evaluation + node update: yarn tensions and damage at the iterate `prev`, then
-    the φ-update of every node into (cur, v1, f1) with per-row error sums."""
+    the φ-update of every node into (cur, v1, f1). t_seg: row buffers (9, nx + 1); err = (per-row
+    sums (2, ny), per-node scratch (node_count,), per-node scratch (node_count,))."""
+    err_rows, err_num, err_den = err
     nx, ny = grid
     mass, inv_mass, charge, coef, inv_l02 = fab
     kind, fung_h, u_crit, rate = mat
     efield, bfield, region, z0, grav = fld
-    yarn_tensions(prev, nx, ny, alpha_c, coef, inv_l02, kind, fung_h, u_crit, rate, t_seg,
-                  alpha_t)
-    node_update(prev, x0, v0, f0, t_seg, nx, ny, mass, inv_mass, charge, phi, dt, efield,
-                bfield, region, z0, grav, skip_err, cur, v1, f1, err_rows)
+    fused_iterate(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind, fung_h, u_crit,
+                  rate, mass, inv_mass, charge, phi, dt, efield, bfield, region, z0, grav, skip_err,
+                  cur, v1, f1, err_rows, err_num, err_den, t_seg)
 
 
 @njit(cache=True)
@@ -77,7 +77,8 @@ def attempt_step(grid, fab, mat, fld, body, sin, sout, work, phi, dt, tol, kmax)
     has_body, radius, b_mass, b_inertia, q_pos, q_val, mu_s, mu_d = body
     x0, v0, f0, alpha_c, b_in = sin
     x1, v1, f1, alpha_t, b_out = sout
-    xbuf, t_seg, err_rows, cand, flag, c_node, c_imp, c_arm, c_proj, sum_buf = work
+    xbuf, t_seg, err_work, cand, flag, c_node, c_imp, c_arm, c_proj, sum_buf = work
+    err_rows = err_work[0]
 
     ncand = 0
     if has_body:
@@ -105,7 +106,7 @@ def attempt_step(grid, fab, mat, fld, body, sin, sout, work, phi, dt, tol, kmax)
         prev = xbuf if k % 2 == 1 else x1
         cur = x1 if k % 2 == 1 else xbuf
         fabric_iterate(grid, fab, mat, fld, prev, x0, v0, f0, alpha_c, flag, cur, v1, f1,
-                       alpha_t, t_seg, err_rows, phi, dt)
+                       alpha_t, t_seg, err_work, phi, dt)
         num_b = 0.0
         den_b = 0.0
         if has_body:

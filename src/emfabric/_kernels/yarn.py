@@ -22,13 +22,23 @@ def _stress_factor(u2, kind, fung_h):
     return e
 
 
+@njit(cache=True, inline="always")
+def segment_tension(dx, dy, dz, inv_l02, alpha_c, coef, kind, fung_h, u_crit, rate):
+    """(tension factor S·A0/L0 [N/m], trial α) of a segment with end difference d."""
+    u2 = (dx * dx + dy * dy + dz * dz) * inv_l02
+    alpha = alpha_c
+    # damage, eq. 2.6: irreversible, only past the critical stretch
+    if u2 > u_crit * u_crit and rate > 0.0:
+        alpha = min(alpha, math.exp(-rate * (math.sqrt(u2) - u_crit) / u_crit))
+    return alpha * coef * _stress_factor(u2, kind, fung_h), alpha
+
+
 @njit(cache=True)
 def _family(x, first, count, step, sbase, alpha_c, coef, inv_l02, kind, fung_h, u_crit, rate,
             t_out, alpha_out):
     """Tensions of `count` consecutive segments s = sbase + k joining a = first + k, a + step."""
     xx, xy, xz = x[0], x[1], x[2]
     tx, ty, tz = t_out[0], t_out[1], t_out[2]
-    uc2 = u_crit * u_crit
     for k in range(count):
         a = first + k
         b = a + step
@@ -36,14 +46,8 @@ def _family(x, first, count, step, sbase, alpha_c, coef, inv_l02, kind, fung_h, 
         dx = xx[b] - xx[a]
         dy = xy[b] - xy[a]
         dz = xz[b] - xz[a]
-        u2 = (dx * dx + dy * dy + dz * dz) * inv_l02[s]
-        alpha = alpha_c[s]
-        # damage, eq. 2.6: irreversible, only past the critical stretch
-        if u2 > uc2 and rate > 0.0:
-            trial = math.exp(-rate * (math.sqrt(u2) - u_crit) / u_crit)
-            alpha = min(alpha, trial)
-        alpha_out[s] = alpha
-        c = alpha * coef[s] * _stress_factor(u2, kind, fung_h)
+        c, alpha_out[s] = segment_tension(dx, dy, dz, inv_l02[s], alpha_c[s], coef[s], kind,
+                                          fung_h, u_crit, rate)
         tx[s] = c * dx
         ty[s] = c * dy
         tz[s] = c * dz
