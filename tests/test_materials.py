@@ -7,23 +7,40 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from emfabric._kernels.yarn import MATERIAL_FUNG, yarn_tensions
+from emfabric._kernels.step import fabric_iterate
+from emfabric._kernels.yarn import MATERIAL_FUNG
 
 E_MOD, A0, L0 = 126e9, math.pi * 0.000185**2, 0.01
 
 
+def _node_forces(x, nx, ny, coef, rest_w, rest_f, alpha, kind=0, fung_h=0.0, u_crit=10.0,
+                 rate=0.0):
+    """Yarn force on every node and the trial damage, from the production kernel (Δt = 0)."""
+    n, s = nx * ny, ny * (nx - 1) + (ny - 1) * nx
+    inv_l02 = np.concatenate([np.full(ny * (nx - 1), 1 / rest_w**2),
+                              np.full((ny - 1) * nx, 1 / rest_f**2)])
+    fab = (np.ones(n), np.ones(n), np.zeros(n), coef, inv_l02)
+    fld = (np.zeros(3), np.zeros(3), 0, 0.0, np.zeros(3))
+    f1, a_out = np.empty((3, n)), np.empty(s)
+    fabric_iterate((nx, ny), fab, (kind, fung_h, u_crit, rate), fld, x, x, np.zeros((3, n)),
+                   np.zeros((3, n)), alpha, np.ones(n, np.uint8), np.empty((3, n)),
+                   np.empty((3, n)), f1, a_out, np.empty((9, nx + 1)),
+                   (np.empty((2, ny)), np.empty(n), np.empty(n)), 1.0, 0.0)
+    return f1, a_out
+
+
 def _pair_tension(stretch, kind=0, fung_h=0.0, modulus=E_MOD, alpha=1.0, u_crit=1.03,
                   rate=0.0):
-    """Tension on node 0 of a 2×2 grid whose bottom warp segment has the given stretch."""
+    """Force on node 0 of a 2×2 grid whose bottom warp segment (0–1) has the given stretch;
+    the other three yarns are at their rest length (no force)."""
     x = np.zeros((3, 4))
-    x[0] = [0.0, stretch * L0, 0.0, L0]  # segment 0 joins nodes 0 and 1
+    x[0] = [0.0, stretch * L0, 0.0, stretch * L0]
     x[1] = [0.0, 0.0, L0, L0]
     coef = np.full(4, modulus * A0 / L0)
-    t = np.empty((3, 4))
-    a_out = np.empty(4)
-    yarn_tensions(x, 2, 2, np.full(4, alpha), coef, np.full(4, 1 / L0**2), kind, fung_h,
-                  u_crit, rate, t, a_out)
-    return t[:, 0], a_out[0]
+    coef[1] = 0.0  # the top warp yarn (2–3) carries nothing
+    f, a_out = _node_forces(x, 2, 2, coef, L0, L0, np.full(4, alpha), kind, fung_h, u_crit,
+                            rate)
+    return f[:, 0], a_out[0]
 
 
 @pytest.mark.parametrize("u", [1.001, 1.02, 1.05, 1.3])
@@ -67,28 +84,32 @@ def test_paper_damage_rate_is_gentle():
     assert alpha > 0.99
 
 
-def _reference_tensions(x, nx, ny, coef, inv_l02, alpha_c):
-    """Plain-NumPy reference of the kernel (KSV, no damage)."""
+def _reference_forces(x, nx, ny, coef, rest_w, rest_f, alpha_c):
+    """Plain-NumPy reference: segment tensions scattered to their end nodes (KSV, no damage)."""
     idx = np.arange(nx * ny).reshape(ny, nx)
     a = np.concatenate([idx[:, :-1].ravel(), idx[:-1, :].ravel()])
     b = np.concatenate([idx[:, 1:].ravel(), idx[1:, :].ravel()])
+    rest = np.concatenate([np.full(ny * (nx - 1), rest_w), np.full((ny - 1) * nx, rest_f)])
     d = x[:, b] - x[:, a]
-    u2 = (d * d).sum(axis=0) * inv_l02
-    s = alpha_c * coef * np.maximum(u2 - 1, 0) / 2
-    return s * d
+    u2 = (d * d).sum(axis=0) / rest**2
+    t = alpha_c * coef * np.maximum(u2 - 1, 0) / 2 * d
+    f = np.zeros_like(x)
+    for c in range(3):
+        np.add.at(f[c], a, t[c])
+        np.add.at(f[c], b, -t[c])
+    return f
 
 
 @settings(max_examples=25, deadline=None)
 @given(st.integers(2, 7), st.integers(2, 7), st.integers(0, 2**32 - 1))
 def test_kernel_matches_numpy_reference(nx, ny, seed):
-    """The grid kernel equals a plain-NumPy segment loop on random positions."""
+    """The fused grid kernel's node forces equal a plain-NumPy segment scatter on random input."""
     rng = np.random.default_rng(seed)
     n, s = nx * ny, ny * (nx - 1) + (ny - 1) * nx
     x = rng.normal(size=(3, n)) * 0.01
     coef = rng.uniform(1e5, 1e7, s)
-    inv_l02 = 1 / rng.uniform(0.001, 0.01, s) ** 2
+    rest_w, rest_f = rng.uniform(0.001, 0.01, 2)
     alpha = rng.uniform(0.2, 1.0, s)
-    t = np.empty((3, s))
-    yarn_tensions(x, nx, ny, alpha, coef, inv_l02, 0, 0.0, 10.0, 0.0, t, np.empty(s))
-    assert np.allclose(t, _reference_tensions(x, nx, ny, coef, inv_l02, alpha), rtol=1e-12,
-                       atol=0)
+    f, _ = _node_forces(x, nx, ny, coef, rest_w, rest_f, alpha)
+    ref = _reference_forces(x, nx, ny, coef, rest_w, rest_f, alpha)
+    assert np.allclose(f, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())

@@ -13,15 +13,14 @@ import numpy as np
 
 from emfabric._kernels.body import field_wrench
 from emfabric._kernels.energy import step_energy
-from emfabric._kernels.nodes import node_update
 from emfabric._kernels.step import (
     CONTACT_MISSED,
     CONVERGED,
     NOT_CONVERGED,
     NOT_FINITE,
     attempt_step,
+    fabric_iterate,
 )
-from emfabric._kernels.yarn import yarn_tensions
 from emfabric.model import BODY_F, BODY_M, BODY_R0, BODY_V, BODY_W, BODY_X, Model, State
 
 
@@ -171,26 +170,20 @@ class Integrator:
 def initial_forces(model: Model, state: State) -> None:
     """ψ(t) of the start state: yarn + Lorentz + gravity on the nodes, field and gravity on the
     body (the first step's explicit part)."""
-    m = model
-    t_seg = np.empty((3, m.seg_count))
-    alpha = np.empty(m.seg_count)
-    coef = m.seg_modulus * m.yarn_area / m.seg_rest_length
-    yarn_tensions(state.node_x, m.nx, m.ny, state.seg_alpha, coef, 1.0 / m.seg_rest_length**2,
-                  m.material_kind, m.fung_H, m.critical_stretch, m.damage_rate, t_seg, alpha)
-    x1 = np.empty_like(state.node_x)
-    v1 = np.empty_like(state.node_v)
+    integ = Integrator(model)
+    scratch = state.copy()
+    _x, rows, err, _c, _f, *_ = integ.work
     # Δt = 0, φ = 1: the update returns v1 = v0 and ψ(x0, v0) in node_f
-    node_update(state.node_x, state.node_x, state.node_v, np.zeros_like(state.node_f), t_seg,
-                m.nx, m.ny, m.node_mass, m.node_inv_mass, m.node_charge, 1.0, 0.0, m.field_E,
-                m.field_B, m.field_region, m.field_z0, m.gravity,
-                np.ones(m.node_count, dtype=np.uint8), x1, v1, state.node_f, np.empty((2, m.ny)),
-                np.empty(m.node_count), np.empty(m.node_count))
-    if m.has_body:
+    fabric_iterate(integ.grid, integ.fab, integ.mat, integ.fld, state.node_x, state.node_x,
+                   state.node_v, np.zeros_like(state.node_f), state.seg_alpha,
+                   np.ones(model.node_count, dtype=np.uint8), scratch.node_x, scratch.node_v,
+                   state.node_f, scratch.seg_alpha, rows, err, 1.0, 0.0)
+    if model.has_body:
+        m = model
         b = state.body
         field_wrench(b[BODY_X], b[BODY_V], b[BODY_W], b[BODY_R0:BODY_R0 + 3], m.body_charge_pos,
                      m.body_charge, m.field_E, m.field_B, m.field_region, m.field_z0,
                      m.body_mass, m.gravity, b[BODY_F], b[BODY_M])
 
 
-__all__ = ["DivergenceError", "Integrator", "StepInfo", "initial_forces", "step_factor",
-           "NOT_CONVERGED"]
+__all__ = ["DivergenceError", "Integrator", "StepInfo", "initial_forces", "step_factor"]

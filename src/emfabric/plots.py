@@ -462,7 +462,7 @@ class SheetView:
         if not int(snapshots.attrs.get("has_projectile", 1)):
             self.radius = 0.0
         self.nose = snapshots["projectile_nose_body"].values
-        self._sphere = _unit_sphere().reshape(3, -1) * self.radius
+        self._sphere = _unit_sphere() * self.radius  # body frame, shape (3, n_lat, n_lon)
         self._body_artists: list = []
         if linewidth is None:
             linewidth = yarn_linewidth(snapshots)
@@ -493,7 +493,7 @@ class SheetView:
             return
         centre = snapshots["projectile_position"][k].values
         rot = snapshots["projectile_rotation"][k].values  # body -> inertial
-        pts = (rot @ self._sphere).reshape(3, *_unit_sphere().shape[1:]) + centre[:, None, None]
+        pts = np.einsum("ij,jab->iab", rot, self._sphere) + centre[:, None, None]
         self._body_artists.append(self.ax.plot_wireframe(
             pts[0], pts[1], pts[2], color="0.25", linewidth=0.4))
         nose = rot @ self.nose

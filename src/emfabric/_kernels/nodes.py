@@ -1,4 +1,10 @@
-"""Node update of one fixed-point iteration: yarn + Lorentz (+ gravity) forces and the φ-scheme."""
+"""One fixed-point iterate of the fabric: yarn tensions, node forces and the φ-update.
+
+v1 = v0 + Δt/m (φ ψ(t+Δt) + (1−φ) ψ(t)),  x1 = x0 + Δt (φ v1 + (1−φ) v0)  (eqs. 3.2, A12–A13),
+with the Lorentz force q(E + v1 × B) implicit in v1 (solved exactly per node) and the yarn force
+assembled as one difference per node and direction, (t_R − t_L) + (t_U − t_D), which keeps
+mirror-symmetric states exactly symmetric.
+"""
 
 import math
 
@@ -66,20 +72,6 @@ def _advance(n, fx, fy, fz, xk, x0, v0, f0, mass, inv_mass, charge, phi, dt, efi
     err_den[n] = keep * math.sqrt(dx * dx + dy * dy + dz * dz)
 
 
-@njit(cache=True, inline="always")
-def _edge_force(t, n, i, j, nx, ny, nw):
-    """Yarn force on a node of the sheet's border (missing neighbours contribute nothing)."""
-    sr = j * (nx - 1) + i
-    su = nw + n
-    f = t[sr] if i < nx - 1 else 0.0
-    if i > 0:
-        f = f - t[sr - 1]
-    g = t[su] if j < ny - 1 else 0.0
-    if j > 0:
-        g = g - t[su - nx]
-    return f + g
-
-
 @njit(cache=True, fastmath={"reassoc", "nsz"})
 def _row_sums(err_num, err_den, nx, ny, err_rows):
     """Per-row sums of the error terms (only these sums may be reassociated)."""
@@ -91,46 +83,6 @@ def _row_sums(err_num, err_den, nx, ny, err_rows):
             b += err_den[i]
         err_rows[0, j] = a
         err_rows[1, j] = b
-
-
-@njit(cache=True)
-def node_update(xk, x0, v0, f0, t_seg, nx, ny, mass, inv_mass, charge, phi, dt, efield, bfield,
-                region, z0, grav, skip_err, x1, v1, f1, err_rows, err_num, err_den):
-    """One iterate of eqs. 3.2/A12-A13 for every node, forces evaluated at the iterate xk.
-
-    v1 = v0 + Δt/m (φ ψ(t+Δt) + (1−φ) ψ(t)),  x1 = x0 + Δt (φ v1 + (1−φ) v0), with the Lorentz
-    force q(E + v1 × B) implicit in v1 (solved exactly per node). Writes x1, v1, f1 (ψ(t+Δt)
-    without contact) and per-row sums of |x1 − xk| and |x1 − x0| (error measure 3.10-5a) over
-    nodes with skip_err == 0. The yarn force is one difference per node and direction,
-    (t_right − t_left) + (t_up − t_down), which keeps mirror-symmetric states exactly symmetric.
-    """
-    nw = ny * (nx - 1)
-    tx, ty, tz = t_seg[0], t_seg[1], t_seg[2]
-    for j in range(ny):
-        border_row = j == 0 or j == ny - 1
-        for i in range(nx):
-            if border_row or i == 0 or i == nx - 1:
-                n = j * nx + i
-                _advance(n, _edge_force(tx, n, i, j, nx, ny, nw),
-                         _edge_force(ty, n, i, j, nx, ny, nw),
-                         _edge_force(tz, n, i, j, nx, ny, nw), xk, x0, v0, f0, mass, inv_mass,
-                         charge, phi, dt, efield, bfield, region, z0, grav, skip_err, x1, v1, f1,
-                         err_num, err_den)
-        if border_row:
-            continue
-        # interior of the row: all four yarns exist
-        nb = j * nx
-        sb = j * (nx - 1)
-        for i in range(1, nx - 1):
-            n = nb + i
-            sr = sb + i
-            su = nw + n
-            fx = (tx[sr] - tx[sr - 1]) + (tx[su] - tx[su - nx])
-            fy = (ty[sr] - ty[sr - 1]) + (ty[su] - ty[su - nx])
-            fz = (tz[sr] - tz[sr - 1]) + (tz[su] - tz[su - nx])
-            _advance(n, fx, fy, fz, xk, x0, v0, f0, mass, inv_mass, charge, phi, dt, efield,
-                     bfield, region, z0, grav, skip_err, x1, v1, f1, err_num, err_den)
-    _row_sums(err_num, err_den, nx, ny, err_rows)
 
 
 @njit(cache=True)

@@ -3,7 +3,7 @@
 The tension vector of segment s is the force its first node feels, t_s = (S·A0/L0)·d with
 d = x_b − x_a: from ψ = U·S·A0 along d/L and U = L/L0, so no square root is needed for the force.
 Segments are numbered warp first (s = j·(nx−1) + i joins nodes a = j·nx + i and a + 1), then
-fill (s = warp_count + a joins a and a + nx); both loops run over contiguous memory.
+fill (s = warp_count + a joins a and a + nx). The grid loop lives in nodes.fused_iterate.
 """
 
 import math
@@ -31,38 +31,6 @@ def segment_tension(dx, dy, dz, inv_l02, alpha_c, coef, kind, fung_h, u_crit, ra
     if u2 > u_crit * u_crit and rate > 0.0:
         alpha = min(alpha, math.exp(-rate * (math.sqrt(u2) - u_crit) / u_crit))
     return alpha * coef * _stress_factor(u2, kind, fung_h), alpha
-
-
-@njit(cache=True)
-def _family(x, first, count, step, sbase, alpha_c, coef, inv_l02, kind, fung_h, u_crit, rate,
-            t_out, alpha_out):
-    """Tensions of `count` consecutive segments s = sbase + k joining a = first + k, a + step."""
-    xx, xy, xz = x[0], x[1], x[2]
-    tx, ty, tz = t_out[0], t_out[1], t_out[2]
-    for k in range(count):
-        a = first + k
-        b = a + step
-        s = sbase + k
-        dx = xx[b] - xx[a]
-        dy = xy[b] - xy[a]
-        dz = xz[b] - xz[a]
-        c, alpha_out[s] = segment_tension(dx, dy, dz, inv_l02[s], alpha_c[s], coef[s], kind,
-                                          fung_h, u_crit, rate)
-        tx[s] = c * dx
-        ty[s] = c * dy
-        tz[s] = c * dz
-
-
-@njit(cache=True)
-def yarn_tensions(x, nx, ny, alpha_c, coef, inv_l02, kind, fung_h, u_crit, rate, t_out,
-                  alpha_out):
-    """Tension vectors t_out (3, seg_count) [N] and trial damage alpha_out at positions x."""
-    nw = ny * (nx - 1)
-    for j in range(ny):
-        _family(x, j * nx, nx - 1, 1, j * (nx - 1), alpha_c, coef, inv_l02, kind, fung_h,
-                u_crit, rate, t_out, alpha_out)
-    _family(x, 0, (ny - 1) * nx, nx, nw, alpha_c, coef, inv_l02, kind, fung_h, u_crit, rate,
-            t_out, alpha_out)
 
 
 @njit(cache=True)
