@@ -65,7 +65,7 @@ def _direct(pos, q, v, w, e, b):
     """Eqs. 6.3–6.4 summed by hand."""
     force = np.zeros(3)
     moment = np.zeros(3)
-    for r, qi in zip(pos, q):
+    for r, qi in zip(pos, q, strict=True):
         psi = qi * (e + np.cross(v + np.cross(w, r), b))
         force += psi
         moment += np.cross(r, psi)

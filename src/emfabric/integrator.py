@@ -65,7 +65,7 @@ class Integrator:
     def __init__(self, model: Model):
         self.model = model
         m = model
-        n, s = m.node_count, m.seg_count
+        n = m.node_count
         sc = m.scenario
         coef = m.seg_modulus * m.yarn_area / m.seg_rest_length
         self.coef = coef

@@ -145,7 +145,7 @@ class Contact(_Section):
 
 class Solver(_Section):
     scheme: Literal["fixed-point", "anderson"] = "fixed-point"
-    """Nonlinear solver of each φ-step: the paper's fixed-point iteration, or Anderson-accelerated."""
+    """Solver of each φ-step: the paper's fixed-point iteration, or its Anderson acceleration."""
     phi: Annotated[float, Field(ge=0.0, le=1.0)] = 0.5
     tolerance: PositiveFloat = 1e-6
     target_iterations: Annotated[int, Field(ge=1, le=1000)] = 6

@@ -19,9 +19,9 @@ from emfabric._kernels.yarn import strain_energy_density
 
 
 @njit(cache=True)
-def step_energy(x0, x1, v0, v1, f1, mass, inv_mass, charge, efield, bfield, region, z0, grav, phi, dt,
-                nc, c_node, c_imp, c_arm, c_proj, b_in, b_out, q_pos, q_val, b_mass, seg_nodes,
-                alpha_old, alpha_new, coef, rest, kind, fung_h, out):
+def step_energy(x0, x1, v0, v1, f1, mass, inv_mass, charge, efield, bfield, region, z0, grav,
+                phi, dt, nc, c_node, c_imp, c_arm, c_proj, b_in, b_out, q_pos, q_val, b_mass,
+                seg_nodes, alpha_old, alpha_new, coef, rest, kind, fung_h, out):
     """Add this step's field work, gravity work and dissipations to out (6,) [J]."""
     w_field = 0.0
     w_grav = 0.0
