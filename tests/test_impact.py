@@ -26,7 +26,8 @@ def _oblique(dt):
     return make(**{
         "fabric.nodes": [15, 15], "fabric.size": [0.1, 0.1], "fabric.edges": "free",
         "fabric.rescale": True, "field.B": [0, 0, 0], "projectile.radius": 0.01,
-        "projectile.position": [0.013, -0.007, 0.0101], "projectile.velocity": [30.0, -20.0, -200.0],
+        "projectile.position": [0.013, -0.007, 0.0101],
+        "projectile.velocity": [30.0, -20.0, -200.0],
         "projectile.angular_velocity": [100.0, -300.0, 2000.0], "solver.end_time": 40e-6,
         "solver.adaptive": False, "solver.dt_max": dt, "solver.tolerance": 1e-10,
         "solver.max_iterations": 100,
