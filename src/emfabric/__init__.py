@@ -13,10 +13,6 @@ try:
 except PackageNotFoundError:  # running from a source tree without installation
     __version__ = "0.0.0+unknown"
 
-from emfabric.builder import build_model
-from emfabric.integrator import DivergenceError, Integrator, StepInfo
-from emfabric.model import Model, State
-from emfabric.run import RunResult, run
 from emfabric.scenario import (
     Scenario,
     ScenarioError,
@@ -24,6 +20,27 @@ from emfabric.scenario import (
     load_scenario,
     scenario_from_dict,
 )
+
+# the simulator (Numba kernels) loads on first use, so that plotting never imports it
+_LAZY = {
+    "build_model": "emfabric.builder",
+    "DivergenceError": "emfabric.integrator",
+    "Integrator": "emfabric.integrator",
+    "StepInfo": "emfabric.integrator",
+    "Model": "emfabric.model",
+    "State": "emfabric.model",
+    "RunResult": "emfabric.run",
+    "run": "emfabric.run",
+}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        return getattr(importlib.import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'emfabric' has no attribute {name!r}")
+
 
 __all__ = [
     "DivergenceError",

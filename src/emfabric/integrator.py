@@ -89,6 +89,10 @@ class Integrator:
             np.empty(n),  # summation buffer
         )
         solver = sc.solver
+        depth = solver.anderson_depth if solver.scheme == "anderson" else 0
+        shape = (3, n) if depth else (3, 0)
+        self.accel = (np.empty(shape), np.empty((depth, *shape)), np.empty((depth, *shape)),
+                      np.empty(shape), np.empty(shape), np.zeros((depth, depth)))
         self.phi = solver.phi
         self.tol = solver.tolerance
         self.k_target = solver.target_iterations if solver.adaptive else solver.max_iterations
@@ -109,7 +113,7 @@ class Integrator:
         while True:
             status, k, err, nc = attempt_step(self.grid, self.fab, self.mat, self.fld, self.body,
                                               sin, sout, self.work, self.phi, dt, self.tol,
-                                              self.k_target)
+                                              self.k_target, self.accel)
             evaluations += k
             if status == CONVERGED:
                 break

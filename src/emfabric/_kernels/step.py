@@ -11,6 +11,7 @@ import math
 import numpy as np
 from numba import njit
 
+from emfabric._kernels.anderson import anderson_mix
 from emfabric._kernels.body import body_update
 from emfabric._kernels.contact import find_candidates, sphere_contact
 from emfabric._kernels.nodes import fused_iterate
@@ -64,7 +65,7 @@ def fabric_iterate(grid, fab, mat, fld, prev, x0, v0, f0, alpha_c, skip_err, cur
 
 
 @njit(cache=True)
-def attempt_step(grid, fab, mat, fld, body, sin, sout, work, phi, dt, tol, kmax):
+def attempt_step(grid, fab, mat, fld, body, sin, sout, work, phi, dt, tol, kmax, accel):
     """Iterate the coupled step to ϖ_K ≤ tol within kmax iterations.
 
     Returns (status, K, ϖ_K, contact count). On CONVERGED, sout holds the state at t + Δt and
@@ -78,6 +79,8 @@ def attempt_step(grid, fab, mat, fld, body, sin, sout, work, phi, dt, tol, kmax)
     x0, v0, f0, alpha_c, b_in = sin
     x1, v1, f1, alpha_t, b_out = sout
     xbuf, t_seg, err_work, cand, flag, c_node, c_imp, c_arm, c_proj, sum_buf = work
+    x_mix, d_f, d_g, f_prev, g_prev, gram = accel
+    anderson = d_f.shape[0] > 0
     err_rows = err_work[0]
 
     ncand = 0
@@ -94,17 +97,31 @@ def attempt_step(grid, fab, mat, fld, body, sin, sout, work, phi, dt, tol, kmax)
     else:
         flag[:] = 0
 
+    # displacement below round-off of the coordinates is no motion (ϖ would be noise/noise)
+    still = 0.0
+    for n in range(x0.shape[1]):
+        still += abs(x0[0, n]) + abs(x0[1, n]) + abs(x0[2, n])
+    still *= 1e-13
+
     imp_force = np.zeros(3)
     imp_moment = np.zeros(3)
     b_out[:] = b_in
-    # iterate K-1 is read from `prev`, iterate K written to `cur`; iterate 0 is x0 (ϖ_0 = 1)
+    # iterate K-1 is read from `prev`, iterate K written to `cur`; iterate 0 is x0 (ϖ_0 = 1).
+    # Plain fixed point: prev and cur alternate between xbuf and x1. Anderson: cur is always
+    # x1 = G(prev) and the next prev is the mixed iterate in x_mix.
     xbuf[:] = x0
+    if anderson:
+        x_mix[:] = x0
     err = 1.0
     nc = 0
     k = 0
     for k in range(1, kmax + 1):
-        prev = xbuf if k % 2 == 1 else x1
-        cur = x1 if k % 2 == 1 else xbuf
+        if anderson:
+            prev = x_mix
+            cur = x1
+        else:
+            prev = xbuf if k % 2 == 1 else x1
+            cur = x1 if k % 2 == 1 else xbuf
         fabric_iterate(grid, fab, mat, fld, prev, x0, v0, f0, alpha_c, flag, cur, v1, f1,
                        alpha_t, t_seg, err_work, phi, dt)
         num_b = 0.0
@@ -123,16 +140,18 @@ def attempt_step(grid, fab, mat, fld, body, sin, sout, work, phi, dt, tol, kmax)
         for j in range(ny):
             num += err_rows[0, j]
             den += err_rows[1, j]
-        err_f = num / den if den > 0.0 else (0.0 if num == 0.0 else 1.0)
+        err_f = num / den if den > still else (0.0 if num <= still else 1.0)
         err_b = num_b / den_b if den_b > 0.0 else (0.0 if num_b == 0.0 else 1.0)
         err = max(err_f, err_b)
         if not (math.isfinite(num) and math.isfinite(den) and math.isfinite(num_b)):
-            if k % 2 == 0:
+            if k % 2 == 0 and not anderson:
                 x1[:] = xbuf
             return NOT_FINITE, k, math.inf, nc
         if err <= tol:
             break
-    if k % 2 == 0:
+        if anderson:
+            anderson_mix(k, x_mix, x1, d_f, d_g, f_prev, g_prev, gram)
+    if k % 2 == 0 and not anderson:
         x1[:] = xbuf
     if err > tol:
         return NOT_CONVERGED, k, err, nc

@@ -137,7 +137,7 @@ class Recorder:
         return ds
 
 
-def run_attributes(model: Model, status: str, end_reason: str, wall: float) -> dict[str, str]:
+def run_attributes(model: Model, status: str, end_reason: str, wall: float) -> dict:
     """Global attributes: package version, full scenario text, status."""
     from emfabric import __version__
 
@@ -147,6 +147,8 @@ def run_attributes(model: Model, status: str, end_reason: str, wall: float) -> d
         "Conventions": "CF-1.10",
         "emfabric_version": __version__,
         "scenario_name": sc.name,
+        "has_projectile": int(model.has_body),
+        "projectile_radius": model.body_radius if model.has_body else 0.0,
         "scenario": sc.to_toml(),
         "status": status,
         "end_reason": end_reason,
