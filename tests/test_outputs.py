@@ -114,3 +114,27 @@ def test_cli_run_validate_scenarios(tmp_path):
     summary = json.loads(r.stdout)
     assert summary["status"] == "complete" and summary["steps"] > 0
     assert (tmp_path / "d" / "history.nc").exists()
+
+
+def test_history_record_matches_diagnostics(small_run):
+    """The compiled history row agrees with the plain diagnostics of the final state."""
+    from emfabric.diagnostics import projectile_energy, projectile_momenta, tilt
+    from emfabric.model import ENERGY_TERMS
+
+    res, _ = small_run
+    ds, st, m = res.history, res.state, res.model
+    last = ds.isel(time=-1)
+    ke_t, ke_r = projectile_energy(m, st)
+    p, ang = projectile_momenta(m, st)
+    assert float(last.tilt) == pytest.approx(tilt(m, st), rel=1e-12, abs=1e-15)
+    assert float(last.kinetic_energy_projectile) == pytest.approx(ke_t + ke_r, rel=1e-12)
+    assert float(last.kinetic_energy_projectile_rotation) == pytest.approx(ke_r, rel=1e-12,
+                                                                           abs=1e-18)
+    np.testing.assert_allclose(last.projectile_momentum.values, p, rtol=1e-12)
+    np.testing.assert_allclose(last.projectile_angular_momentum.values, ang, rtol=1e-10,
+                               atol=1e-15)
+    np.testing.assert_array_equal(last.projectile_velocity.values, st.body_v)
+    for i, name in enumerate(ENERGY_TERMS):
+        assert float(last[name]) == st.energy[i]
+    ke_f = 0.5 * float((m.node_mass * (st.node_v**2).sum(axis=0)).sum())
+    assert float(last.kinetic_energy_fabric) == pytest.approx(ke_f, rel=1e-12)

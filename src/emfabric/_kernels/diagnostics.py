@@ -79,3 +79,60 @@ def fabric_diagnostics(x, v, xref, mass, seg_nodes, alpha, coef, rest, kind, fun
     out[AHEAD_MAX] = ahead_max
     out[APPROACH_MAX] = approach
     out[RECEDE_MAX] = recede
+
+
+@njit(cache=True)
+def history_row(t, dt, iterations, error, rejected, evaluations, contacts, body, has_body,
+                b_mass, inertia_body, nose_body, diag, energy, e_initial, row):
+    """Write one history record (the column order of emfabric.io.history.VARIABLES) into row.
+
+    Returns the record's total energy (kinetic + strain + dissipated − work) [J].
+    """
+    rot = body[5:8]
+    x = body[0]
+    v = body[1]
+    w = body[2]
+    nose = rot @ nose_body
+    inertia = rot @ inertia_body @ rot.T
+    h = inertia @ w
+    p = b_mass * v if has_body else np.zeros(3)
+    ke_r = 0.5 * np.sum(w * h) if has_body else 0.0
+    ke_t = 0.5 * b_mass * np.sum(v * v) if has_body else 0.0
+    ang = np.cross(x, p) + h if has_body else np.zeros(3)
+    # tilt, eq. 5.2, in atan2 form (accurate at small angles)
+    cr = np.cross(nose, nose_body)
+    tilt = math.atan2(math.sqrt(np.sum(cr * cr)), np.sum(nose * nose_body)) if has_body else 0.0
+    total = (ke_t + ke_r + diag[KE] + diag[STRAIN] + energy[2] + energy[3] + energy[4]
+             + energy[5] - energy[0] - energy[1])
+    e0 = total if math.isnan(e_initial) else e_initial
+    row[0] = t
+    row[1] = dt
+    row[2] = iterations
+    row[3] = error
+    row[4] = rejected
+    row[5] = evaluations
+    row[6:9] = x
+    row[9:12] = v
+    row[12:15] = w
+    row[15:18] = nose
+    k = 18
+    row[k] = tilt
+    row[k + 1] = contacts
+    row[k + 2] = diag[DEFLECTION]
+    row[k + 3] = diag[STRETCH]
+    k += 4
+    row[k:k + 3] = diag[PX:PZ + 1]
+    row[k + 3:k + 6] = diag[LX:LZ + 1]
+    row[k + 6:k + 9] = p
+    row[k + 9:k + 12] = ang
+    k += 12
+    row[k] = ke_t + ke_r
+    row[k + 1] = ke_r
+    row[k + 2] = diag[KE]
+    row[k + 3] = diag[STRAIN]
+    row[k + 4] = diag[BROKEN]
+    row[k + 5] = diag[MIN_ALPHA]
+    k += 6
+    row[k:k + 6] = energy
+    row[k + 6] = total - e0
+    return e0

@@ -3,20 +3,16 @@
 from __future__ import annotations
 
 import datetime as _dt
+import math
 from pathlib import Path
 
 import numpy as np
 import xarray as xr
 
 from emfabric._kernels import diagnostics as _k
-from emfabric.diagnostics import (
-    fabric_diagnostics,
-    projectile_energy,
-    projectile_momenta,
-    tilt,
-)
+from emfabric.diagnostics import fabric_diagnostics
 from emfabric.io.atomic import write_atomic
-from emfabric.model import ENERGY_TERMS, Model, State
+from emfabric.model import Model, State
 
 # name -> (width, units, long name); width 3 means a (time, xyz) variable
 VARIABLES: dict[str, tuple[int, str, str]] = {
@@ -74,7 +70,7 @@ class Recorder:
         self.coef = coef
         self._rows = np.empty((1024, COLUMNS))
         self.count = 0
-        self._initial_energy: float | None = None
+        self._initial_energy = math.nan
         self.last_diag = np.empty(_k.COUNT)
 
     def record(self, state: State, dt: float = 0.0, iterations: int = 0,
@@ -84,34 +80,10 @@ class Recorder:
         m = self.model
         d = fabric_diagnostics(m, state, self.coef)
         self.last_diag = d
-        ke_t, ke_r = projectile_energy(m, state)
-        p_b, l_b = projectile_momenta(m, state)
-        e = state.energy
-        total = ke_t + ke_r + d[_k.KE] + d[_k.STRAIN] + e[2:].sum() - e[0] - e[1]
-        if self._initial_energy is None:
-            self._initial_energy = total
-        row = self._rows[self.count]
-        row[0] = state.t
-        vals = {
-            "dt": dt, "iterations": iterations, "error": error,
-            "rejected_steps": state.rejected, "force_evaluations": state.evaluations,
-            "projectile_position": state.body_x, "projectile_velocity": state.body_v,
-            "angular_velocity": state.body_omega,
-            "projectile_nose": state.body_rotation @ m.body_nose,
-            "tilt": tilt(m, state) if m.has_body else 0.0,
-            "contact_nodes": state.contact_count, "max_deflection": d[_k.DEFLECTION],
-            "max_stretch": d[_k.STRETCH], "fabric_momentum": d[_k.PX:_k.PZ + 1],
-            "fabric_angular_momentum": d[_k.LX:_k.LZ + 1], "projectile_momentum": p_b,
-            "projectile_angular_momentum": l_b, "kinetic_energy_projectile": ke_t + ke_r,
-            "kinetic_energy_projectile_rotation": ke_r, "kinetic_energy_fabric": d[_k.KE],
-            "strain_energy": d[_k.STRAIN], "broken_yarns": d[_k.BROKEN],
-            "min_damage": d[_k.MIN_ALPHA],
-            "energy_balance_error": total - self._initial_energy,
-        }
-        for i, name in enumerate(ENERGY_TERMS):
-            vals[name] = e[i]
-        for name, value in vals.items():
-            row[LAYOUT[name]] = value
+        self._initial_energy = _k.history_row(
+            state.t, dt, iterations, error, state.rejected, state.evaluations,
+            state.contact_count, state.body, m.has_body, m.body_mass, m.body_inertia,
+            m.body_nose, d, state.energy, self._initial_energy, self._rows[self.count])
         self.count += 1
 
     def to_dataset(self, attrs: dict[str, str]) -> xr.Dataset:
