@@ -9,10 +9,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from emfabric._kernels.body import field_wrench
 from emfabric._kernels.energy import step_energy
+from emfabric._kernels.nodes import ROWS_PER_BLOCK
 from emfabric._kernels.step import (
     CONTACT_MISSED,
     CONVERGED,
@@ -59,10 +61,16 @@ def step_factor(error: float, k: int, tol: float, k_target: int, p: float) -> fl
     return tol ** (1.0 / (p * k_target)) / error ** (1.0 / (p * k))
 
 
+THREADS_FROM_NODES = 200 * 200
+"""Sheets with at least this many nodes use the two-thread kernel."""
+
+
 class Integrator:
     """Holds the workspace of the step kernel for one Model."""
 
-    def __init__(self, model: Model):
+    def __init__(self, model: Model, *, threads: bool | None = None):
+        """threads: use the row-block threaded kernel (default: for sheets of at least
+        THREADS_FROM_NODES nodes when Numba has more than one thread)."""
         self.model = model
         m = model
         n = m.node_count
@@ -76,9 +84,13 @@ class Integrator:
         self.fld = (m.field_E, m.field_B, m.field_region, m.field_z0, m.gravity)
         self.body = (m.has_body, m.body_radius, m.body_mass, m.body_inertia, m.body_charge_pos,
                      m.body_charge, sc.contact.static_friction, sc.contact.dynamic_friction)
+        # threads pay off on large sheets only; block size fixed, so results never depend on them
+        threaded = threads if threads is not None else (
+            n >= THREADS_FROM_NODES and numba.config.NUMBA_NUM_THREADS > 1)
+        blocks = -(-m.ny // ROWS_PER_BLOCK) if threaded else 1
         self.work = (
             np.empty((3, n)),  # second iterate buffer
-            np.empty((9, m.nx + 1)),  # row buffers of yarn tensions
+            np.empty((blocks, 9, m.nx + 1)),  # row buffers of yarn tensions, per row block
             (np.empty((2, m.ny)), np.empty(n), np.empty(n)),  # error sums: per row, per node
             np.empty(n, dtype=np.int64),  # contact candidates
             np.zeros(n, dtype=np.uint8),  # candidate flags

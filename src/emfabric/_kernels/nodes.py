@@ -8,7 +8,7 @@ mirror-symmetric states exactly symmetric.
 
 import math
 
-from numba import njit
+from numba import njit, prange
 
 from emfabric._kernels.yarn import segment_tension
 
@@ -85,17 +85,33 @@ def _row_sums(err_num, err_den, nx, ny, err_rows):
         err_rows[1, j] = b
 
 
-@njit(cache=True)
-def fused_iterate(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind, fung_h,
-                  u_crit, rate, mass, inv_mass, charge, phi, dt, efield, bfield, region, z0, grav,
-                  skip_err, x1, v1, f1, err_rows, err_num, err_den, rowbuf):
-    """Yarn tensions at `prev` and the φ-update of every node, row by row.
+@njit(cache=True, inline="always")
+def _fill_row(xx, xy, xz, j, nx, nw, il_f, alpha_c, alpha_t, coef, kind, fung_h, u_crit, rate,
+              out, write_alpha):
+    """Tensions of the fill yarns between rows j and j + 1 into out (3, ≥ nx)."""
+    nb = j * nx
+    for i in range(nx):
+        a = nb + i
+        s = nw + a
+        dx = xx[a + nx] - xx[a]
+        dy = xy[a + nx] - xy[a]
+        dz = xz[a + nx] - xz[a]
+        c, alpha = segment_tension(dx, dy, dz, il_f, alpha_c[s], coef[s], kind, fung_h, u_crit,
+                                   rate)
+        if write_alpha:
+            alpha_t[s] = alpha
+        out[0, i] = c * dx
+        out[1, i] = c * dy
+        out[2, i] = c * dz
 
-    The tensions of row j (warp) and between rows j and j+1 (fill) live in small row buffers
-    (rowbuf, shape (9, nx + 1)) and are consumed at once, so they never travel through memory.
-    Rest lengths are uniform per yarn family on the regular grid (inv_l02[0]: warp, inv_l02[-1]:
-    fill). Same arithmetic as yarn_tensions + the node force (t_R − t_L) + (t_U − t_D).
-    """
+
+@njit(cache=True)
+def _row_block(j0, j1, prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind, fung_h,
+               u_crit, rate, mass, inv_mass, charge, phi, dt, efield, bfield, region, z0, grav,
+               skip_err, x1, v1, f1, err_num, err_den, rowbuf):
+    """Rows j0 ≤ j < j1 of the fused iterate. The tensions of row j (warp) and between rows j and
+    j + 1 (fill) live in rowbuf (9, nx + 1) and are consumed at once; a block recomputes the fill
+    tensions below its first row (writing no damage), so blocks are independent."""
     nw = ny * (nx - 1)
     il_w = inv_l02[0]
     il_f = inv_l02[inv_l02.shape[0] - 1]
@@ -106,8 +122,12 @@ def fused_iterate(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kin
     td = rowbuf[6:9]
     twp[:, 0] = 0.0
     twp[:, nx] = 0.0
-    td[:] = 0.0
-    for j in range(ny):
+    if j0 > 0:
+        _fill_row(xx, xy, xz, j0 - 1, nx, nw, il_f, alpha_c, alpha_t, coef, kind, fung_h,
+                  u_crit, rate, td, False)
+    else:
+        td[:] = 0.0
+    for j in range(j0, j1):
         nb = j * nx
         sb = j * (nx - 1)
         for i in range(nx - 1):
@@ -121,17 +141,8 @@ def fused_iterate(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kin
             twp[1, i + 1] = c * dy
             twp[2, i + 1] = c * dz
         if j < ny - 1:
-            for i in range(nx):
-                a = nb + i
-                s = nw + a
-                dx = xx[a + nx] - xx[a]
-                dy = xy[a + nx] - xy[a]
-                dz = xz[a + nx] - xz[a]
-                c, alpha_t[s] = segment_tension(dx, dy, dz, il_f, alpha_c[s], coef[s], kind,
-                                                fung_h, u_crit, rate)
-                tu[0, i] = c * dx
-                tu[1, i] = c * dy
-                tu[2, i] = c * dz
+            _fill_row(xx, xy, xz, j, nx, nw, il_f, alpha_c, alpha_t, coef, kind, fung_h, u_crit,
+                      rate, tu, True)
         else:
             tu[:, :nx] = 0.0
         for i in range(nx):
@@ -142,4 +153,39 @@ def fused_iterate(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kin
             _advance(nb + i, fx, fy, fz, prev, x0, v0, f0, mass, inv_mass, charge, phi, dt,
                      efield, bfield, region, z0, grav, skip_err, x1, v1, f1, err_num, err_den)
         tu, td = td, tu
+
+
+ROWS_PER_BLOCK = 16
+
+
+@njit(cache=True)
+def fused_iterate(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind, fung_h,
+                  u_crit, rate, mass, inv_mass, charge, phi, dt, efield, bfield, region, z0, grav,
+                  skip_err, x1, v1, f1, err_rows, err_num, err_den, rowbuf):
+    """Yarn tensions at `prev` and the φ-update of every node (serial, all rows in one block).
+
+    Rest lengths are uniform per yarn family on the regular grid (inv_l02[0]: warp, inv_l02[-1]:
+    fill). rowbuf: (blocks, 9, nx + 1), only block 0 used here.
+    """
+    _row_block(0, ny, prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind, fung_h,
+               u_crit, rate, mass, inv_mass, charge, phi, dt, efield, bfield, region, z0, grav,
+               skip_err, x1, v1, f1, err_num, err_den, rowbuf[0])
+    _row_sums(err_num, err_den, nx, ny, err_rows)
+
+
+@njit(cache=True, parallel=True)
+def fused_iterate_threads(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind,
+                          fung_h, u_crit, rate, mass, inv_mass, charge, phi, dt, efield, bfield,
+                          region, z0, grav, skip_err, x1, v1, f1, err_rows, err_num, err_den,
+                          rowbuf):
+    """fused_iterate over blocks of ROWS_PER_BLOCK rows in parallel threads. Every value is
+    computed by the same arithmetic as in the serial kernel, so results do not depend on the
+    number of threads."""
+    blocks = (ny + ROWS_PER_BLOCK - 1) // ROWS_PER_BLOCK
+    for b in prange(blocks):
+        j0 = b * ROWS_PER_BLOCK
+        j1 = min(ny, j0 + ROWS_PER_BLOCK)
+        _row_block(j0, j1, prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind,
+                   fung_h, u_crit, rate, mass, inv_mass, charge, phi, dt, efield, bfield, region,
+                   z0, grav, skip_err, x1, v1, f1, err_num, err_den, rowbuf[b])
     _row_sums(err_num, err_den, nx, ny, err_rows)

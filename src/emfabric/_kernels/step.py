@@ -14,7 +14,7 @@ from numba import njit
 from emfabric._kernels.anderson import anderson_mix
 from emfabric._kernels.body import body_update
 from emfabric._kernels.contact import find_candidates, sphere_contact
-from emfabric._kernels.nodes import fused_iterate
+from emfabric._kernels.nodes import fused_iterate, fused_iterate_threads
 from emfabric._kernels.sums import fsum
 
 CONVERGED, NOT_CONVERGED, NOT_FINITE, CONTACT_MISSED = 0, 1, 2, 3
@@ -52,16 +52,23 @@ def _nodes_inside(x, inv_mass, flag, centre, radius):
 def fabric_iterate(grid, fab, mat, fld, prev, x0, v0, f0, alpha_c, skip_err, cur, v1, f1,
                    alpha_t, t_seg, err, phi, dt):
     """One force evaluation + node update: yarn tensions and damage at the iterate `prev`, then
-    the φ-update of every node into (cur, v1, f1). t_seg: row buffers (9, nx + 1); err = (per-row
+    the φ-update of every node into (cur, v1, f1). t_seg: row buffers (blocks, 9, nx + 1), more
+    than one block runs the threaded kernel; err = (per-row
     sums (2, ny), per-node scratch (node_count,), per-node scratch (node_count,))."""
     err_rows, err_num, err_den = err
     nx, ny = grid
     mass, inv_mass, charge, coef, inv_l02 = fab
     kind, fung_h, u_crit, rate = mat
     efield, bfield, region, z0, grav = fld
-    fused_iterate(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind, fung_h, u_crit,
-                  rate, mass, inv_mass, charge, phi, dt, efield, bfield, region, z0, grav, skip_err,
-                  cur, v1, f1, err_rows, err_num, err_den, t_seg)
+    if t_seg.shape[0] > 1:
+        fused_iterate_threads(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind,
+                              fung_h, u_crit, rate, mass, inv_mass, charge, phi, dt, efield,
+                              bfield, region, z0, grav, skip_err, cur, v1, f1, err_rows, err_num,
+                              err_den, t_seg)
+    else:
+        fused_iterate(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind, fung_h,
+                      u_crit, rate, mass, inv_mass, charge, phi, dt, efield, bfield, region, z0,
+                      grav, skip_err, cur, v1, f1, err_rows, err_num, err_den, t_seg)
 
 
 @njit(cache=True)
