@@ -24,7 +24,7 @@ TINY = {
 
 def tiny_run(out: Path, progress=None) -> Path:
     """Run the tiny scenario into ``out`` (the tests may use the simulator; animation may not)."""
-    from emfabric.run import run
+    from emfabric.runner import run
     from emfabric.scenario import load_scenario
 
     run(load_scenario("demo-small", TINY), out, progress=progress)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from emfabric.run import run
+from emfabric.runner import run
 
 from conftest import make
 

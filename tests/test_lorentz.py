@@ -7,7 +7,7 @@ import pytest
 
 from emfabric.builder import build_model
 from emfabric.integrator import Integrator
-from emfabric.run import run
+from emfabric.runner import run
 
 from conftest import fabric_only
 

@@ -10,7 +10,7 @@ import xarray as xr
 
 from emfabric import __version__
 from emfabric.io.history import VARIABLES
-from emfabric.run import run
+from emfabric.runner import run
 
 from conftest import make
 

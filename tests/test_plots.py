@@ -24,13 +24,13 @@ TINY = {
     "fabric.damage.critical_stretch": 1.001,
     "fabric.damage.rate": 2.0,
 }
-SIMULATOR = ("emfabric.run", "emfabric.integrator", "emfabric._kernels", "emfabric.builder",
+SIMULATOR = ("emfabric.runner", "emfabric.integrator", "emfabric._kernels", "emfabric.builder",
              "emfabric.model", "emfabric.diagnostics", "numba")
 
 
 def tiny_run(out: Path, progress=None, **overrides) -> Path:
     """Run the tiny scenario into ``out`` (the tests may use the simulator; plots may not)."""
-    from emfabric.run import run
+    from emfabric.runner import run
     from emfabric.scenario import load_scenario
 
     run(load_scenario("demo-small", {**TINY, **overrides}), out, progress=progress)

@@ -29,8 +29,8 @@ _LAZY = {
     "StepInfo": "emfabric.integrator",
     "Model": "emfabric.model",
     "State": "emfabric.model",
-    "RunResult": "emfabric.run",
-    "run": "emfabric.run",
+    "RunResult": "emfabric.runner",
+    "run": "emfabric.runner",
 }
 
 

@@ -52,7 +52,7 @@ def run(
         "--json", help="Print the summary as JSON on stdout")] = False,
 ) -> None:
     """Run a scenario; write history.nc, snapshots and ParaView files into the output folder."""
-    from emfabric.run import run as run_scenario
+    from emfabric.runner import run as run_scenario
 
     sc = _load(scenario, set_)
     out_dir = out if out is not None else Path("runs") / sc.name
