@@ -85,7 +85,9 @@ def run(
 
         try:
             result = run_scenario(sc, out_dir, progress=None if quiet else progress)
-            bar.update(task, completed=t_end * 1e6)
+            elapsed = max(time.perf_counter() - wall0, 1e-9)
+            bar.update(task, completed=t_end * 1e6, t=result.state.t * 1e6,
+                       rate=result.state.t * 1e6 / elapsed * 60.0)
         except KeyboardInterrupt as exc:
             result = getattr(exc, "result", None)
             console.print("[yellow]interrupted[/]: the history written so far is marked partial")

@@ -158,7 +158,8 @@ class Solver(_Section):
     dt_min: PositiveFloat = 1e-13
     dt_initial: PositiveFloat | None = None
     """First Δt tried; default dt_max (the paper)."""
-    end_time: PositiveFloat = 300e-6
+    end_time: PositiveFloat = 1.5e-3
+    """Longest simulated time [s]; a run stops earlier once the projectile has left the sheet."""
     safety: Annotated[float, Field(gt=0, le=1)] = 0.9
     """Factor on Φ_K of eq. 3.9; 1.0 is the paper-literal controller."""
     anderson_depth: Annotated[int, Field(ge=1, le=20)] = 5
