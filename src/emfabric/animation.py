@@ -86,18 +86,12 @@ def render_frames(snapshots: xr.Dataset, history: xr.Dataset | None = None,
         yield np.ascontiguousarray(frame)
 
 
-class _Mp4Writer:
-    """H.264 MP4 through imageio's ffmpeg plugin (bundled ffmpeg binary)."""
+class _PartialFile:
+    """A movie written under a hidden partial name and renamed into place only when complete."""
 
-    def __init__(self, path: Path, fps: int):
+    def __init__(self, path: Path):
         self.path = path
         self.tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
-        self._w = imageio.get_writer(self.tmp, format="FFMPEG", mode="I", fps=fps,
-                                     codec="libx264", quality=8, pixelformat="yuv420p",
-                                     macro_block_size=16)
-
-    def append(self, frame: np.ndarray) -> None:
-        self._w.append_data(frame)
 
     def close(self, ok: bool) -> None:
         self._w.close()
@@ -107,12 +101,24 @@ class _Mp4Writer:
             self.tmp.unlink(missing_ok=True)
 
 
-class _GifWriter:
+class _Mp4Writer(_PartialFile):
+    """H.264 MP4 through imageio's ffmpeg plugin (bundled ffmpeg binary)."""
+
+    def __init__(self, path: Path, fps: int):
+        super().__init__(path)
+        self._w = imageio.get_writer(self.tmp, format="FFMPEG", mode="I", fps=fps,
+                                     codec="libx264", quality=8, pixelformat="yuv420p",
+                                     macro_block_size=16)
+
+    def append(self, frame: np.ndarray) -> None:
+        self._w.append_data(frame)
+
+
+class _GifWriter(_PartialFile):
     """Looping GIF at half resolution, streamed to ffmpeg with a palette per frame."""
 
     def __init__(self, path: Path, fps: int, size: tuple[int, int]):
-        self.path = path
-        self.tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
+        super().__init__(path)
         self.size = (size[0] // 2, size[1] // 2)
         palette = "split[a][b];[a]palettegen=stats_mode=single[p];[b][p]paletteuse=new=1"
         self._w = imageio_ffmpeg.write_frames(
@@ -126,13 +132,6 @@ class _GifWriter:
         # 2 x 2 box average: half size without aliasing the thin yarn lines
         small = frame[: 2 * h, : 2 * w].reshape(h, 2, w, 2, 3).mean(axis=(1, 3))
         self._w.send(np.ascontiguousarray(small.round().astype(np.uint8)))
-
-    def close(self, ok: bool) -> None:
-        self._w.close()
-        if ok:
-            os.replace(self.tmp, self.path)
-        else:
-            self.tmp.unlink(missing_ok=True)
 
 
 def animate(run_dir: Path, gif: bool = False, fps: int = 10) -> list[Path]:
