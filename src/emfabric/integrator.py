@@ -14,7 +14,7 @@ import numpy as np
 
 from emfabric._kernels.body import field_wrench
 from emfabric._kernels.energy import step_energy
-from emfabric._kernels.nodes import ROWS_PER_BLOCK
+from emfabric._kernels.nodes import ROWBUF_ROWS, ROWS_PER_BLOCK
 from emfabric._kernels.step import (
     CONTACT_MISSED,
     CONVERGED,
@@ -90,7 +90,7 @@ class Integrator:
         blocks = -(-m.ny // ROWS_PER_BLOCK) if threaded else 1
         self.work = (
             np.empty((3, n)),  # second iterate buffer
-            np.empty((blocks, 9, m.nx + 1)),  # row buffers of yarn tensions, per row block
+            np.empty((blocks, ROWBUF_ROWS, m.nx + 1)),  # row buffers, per row block
             (np.empty((2, m.ny)), np.empty(n), np.empty(n)),  # error sums: per row, per node
             np.empty(n, dtype=np.int64),  # contact candidates
             np.zeros(n, dtype=np.uint8),  # candidate flags

@@ -10,7 +10,7 @@ import math
 
 from numba import njit, prange
 
-from emfabric._kernels.yarn import segment_tension
+from emfabric._kernels.yarn import MATERIAL_FUNG, _stress_factor
 
 REGION_HALF_SPACE = 1
 
@@ -19,57 +19,6 @@ REGION_HALF_SPACE = 1
 def in_field(z, region, z0):
     """Whether a point at height z feels the field (uniform, or the half-space z < z0)."""
     return region != REGION_HALF_SPACE or z < z0
-
-
-@njit(cache=True, inline="always")
-def _advance(n, fx, fy, fz, xk, x0, v0, f0, mass, inv_mass, charge, phi, dt, efield, bfield,
-             region, z0, grav, skip_err, x1, v1, f1, err_num, err_den):
-    """φ-update of node n given its yarn force (fx, fy, fz); branch-free so loops vectorise.
-
-    A fixed node has inv_mass = 0 and zero velocity, so it keeps x1 = x0 exactly.
-    """
-    m = mass[n]
-    q = charge[n] if in_field(xk[2, n], region, z0) else 0.0
-    # electric part of eq. 2.7 and gravity
-    fx = fx + (m * grav[0] + q * efield[0])
-    fy = fy + (m * grav[1] + q * efield[1])
-    fz = fz + (m * grav[2] + q * efield[2])
-    h = dt * inv_mass[n]
-    ax = v0[0, n] + h * (phi * fx + (1.0 - phi) * f0[0, n])
-    ay = v0[1, n] + h * (phi * fy + (1.0 - phi) * f0[1, n])
-    az = v0[2, n] + h * (phi * fz + (1.0 - phi) * f0[2, n])
-    # magnetic part implicit in v1: v1 − v1 × u = a with u = φΔt q B / m (solved exactly)
-    beta = phi * h * q
-    ux = beta * bfield[0]
-    uy = beta * bfield[1]
-    uz = beta * bfield[2]
-    au = ax * ux + ay * uy + az * uz
-    inv = 1.0 / (1.0 + ux * ux + uy * uy + uz * uz)
-    vx = (ax + (ay * uz - az * uy) + au * ux) * inv
-    vy = (ay + (az * ux - ax * uz) + au * uy) * inv
-    vz = (az + (ax * uy - ay * ux) + au * uz) * inv
-    v1[0, n] = vx
-    v1[1, n] = vy
-    v1[2, n] = vz
-    f1[0, n] = fx + q * (vy * bfield[2] - vz * bfield[1])
-    f1[1, n] = fy + q * (vz * bfield[0] - vx * bfield[2])
-    f1[2, n] = fz + q * (vx * bfield[1] - vy * bfield[0])
-    px = x0[0, n] + dt * (phi * vx + (1.0 - phi) * v0[0, n])
-    py = x0[1, n] + dt * (phi * vy + (1.0 - phi) * v0[1, n])
-    pz = x0[2, n] + dt * (phi * vz + (1.0 - phi) * v0[2, n])
-    x1[0, n] = px
-    x1[1, n] = py
-    x1[2, n] = pz
-    # error measure terms (3.10 step 5a); contact candidates are measured after contact
-    keep = 1.0 - skip_err[n]
-    dx = px - xk[0, n]
-    dy = py - xk[1, n]
-    dz = pz - xk[2, n]
-    err_num[n] = keep * math.sqrt(dx * dx + dy * dy + dz * dz)
-    dx = px - x0[0, n]
-    dy = py - x0[1, n]
-    dz = pz - x0[2, n]
-    err_den[n] = keep * math.sqrt(dx * dx + dy * dy + dz * dz)
 
 
 @njit(cache=True, fastmath={"reassoc", "nsz"})
@@ -85,73 +34,169 @@ def _row_sums(err_num, err_den, nx, ny, err_rows):
         err_rows[1, j] = b
 
 
-@njit(cache=True, inline="always")
-def _fill_row(xx, xy, xz, j, nx, nw, il_f, alpha_c, alpha_t, coef, kind, fung_h, u_crit, rate,
-              out, write_alpha):
-    """Tensions of the fill yarns between rows j and j + 1 into out (3, ≥ nx)."""
-    nb = j * nx
-    for i in range(nx):
-        a = nb + i
-        s = nw + a
-        dx = xx[a + nx] - xx[a]
-        dy = xy[a + nx] - xy[a]
-        dz = xz[a + nx] - xz[a]
-        c, alpha = segment_tension(dx, dy, dz, il_f, alpha_c[s], coef[s], kind, fung_h, u_crit,
-                                   rate)
-        if write_alpha:
-            alpha_t[s] = alpha
-        out[0, i] = c * dx
-        out[1, i] = c * dy
-        out[2, i] = c * dz
+# rows of a block's row buffer, shape (ROWBUF_ROWS, nx + 1)
+_TW, _TU, _TD, _D, _U2, _AL, _F, _A, _UU, _AU, _INV, _Q, _H = (
+    0, 3, 6, 9, 12, 13, 14, 17, 20, 23, 24, 25, 26)
+ROWBUF_ROWS = 27
+
+
+@njit(cache=True)
+def _tensions(xa_x, xa_y, xa_z, xb_x, xb_y, xb_z, count, il2, alpha_c, alpha_t, coef, kind,
+              fung_h, u_crit, rate, buf, out, write_alpha):
+    """Tension vectors of `count` segments joining a[i] to b[i] (row views) into out[:, :count].
+
+    Split into short loops over few arrays so that the compiler vectorises them.
+    """
+    dx, dy, dz = buf[_D], buf[_D + 1], buf[_D + 2]
+    u2 = buf[_U2]
+    al = buf[_AL]
+    for i in range(count):
+        dx[i] = xb_x[i] - xa_x[i]
+        dy[i] = xb_y[i] - xa_y[i]
+        dz[i] = xb_z[i] - xa_z[i]
+    for i in range(count):
+        u2[i] = (dx[i] * dx[i] + dy[i] * dy[i] + dz[i] * dz[i]) * il2
+    # damage, eq. 2.6: irreversible, only past the critical stretch
+    uc2 = u_crit * u_crit
+    for i in range(count):
+        alpha = alpha_c[i]
+        if u2[i] > uc2 and rate > 0.0:
+            alpha = min(alpha, math.exp(-rate * (math.sqrt(u2[i]) - u_crit) / u_crit))
+        al[i] = alpha
+    if write_alpha:
+        for i in range(count):
+            alpha_t[i] = al[i]
+    tx, ty, tz = out[0], out[1], out[2]
+    if kind == MATERIAL_FUNG:
+        for i in range(count):
+            al[i] = al[i] * coef[i] * _stress_factor(u2[i], kind, fung_h)
+    else:
+        # relaxed Kirchhoff–Saint-Venant: S/𝔼 = max(U² − 1, 0)/2
+        for i in range(count):
+            al[i] = al[i] * coef[i] * (0.5 * max(u2[i] - 1.0, 0.0))
+    for i in range(count):
+        tx[i] = al[i] * dx[i]
+        ty[i] = al[i] * dy[i]
+        tz[i] = al[i] * dz[i]
 
 
 @njit(cache=True)
 def _row_block(j0, j1, prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind, fung_h,
                u_crit, rate, mass, inv_mass, charge, phi, dt, efield, bfield, region, z0, grav,
-               skip_err, x1, v1, f1, err_num, err_den, rowbuf):
+               skip_err, x1, v1, f1, err_num, err_den, buf):
     """Rows j0 ≤ j < j1 of the fused iterate. The tensions of row j (warp) and between rows j and
-    j + 1 (fill) live in rowbuf (9, nx + 1) and are consumed at once; a block recomputes the fill
-    tensions below its first row (writing no damage), so blocks are independent."""
+    j + 1 (fill) live in the block's row buffer and are consumed at once; a block recomputes the
+    fill tensions below its first row (writing no damage), so blocks are independent."""
     nw = ny * (nx - 1)
     il_w = inv_l02[0]
     il_f = inv_l02[inv_l02.shape[0] - 1]
     xx, xy, xz = prev[0], prev[1], prev[2]
     # padded warp row: twp[:, i + 1] is the tension of segment (i, i + 1), zeros at both ends
-    twp = rowbuf[0:3]
-    tu = rowbuf[3:6]
-    td = rowbuf[6:9]
+    twp = buf[_TW:_TW + 3]
+    tu = buf[_TU:_TU + 3]
+    td = buf[_TD:_TD + 3]
     twp[:, 0] = 0.0
     twp[:, nx] = 0.0
     if j0 > 0:
-        _fill_row(xx, xy, xz, j0 - 1, nx, nw, il_f, alpha_c, alpha_t, coef, kind, fung_h,
-                  u_crit, rate, td, False)
+        a = (j0 - 1) * nx
+        _tensions(xx[a:a + nx], xy[a:a + nx], xz[a:a + nx], xx[a + nx:a + 2 * nx],
+                  xy[a + nx:a + 2 * nx], xz[a + nx:a + 2 * nx], nx, il_f,
+                  alpha_c[nw + a:nw + a + nx], alpha_t[nw + a:nw + a + nx],
+                  coef[nw + a:nw + a + nx], kind, fung_h, u_crit, rate, buf, td, False)
     else:
         td[:] = 0.0
+    f = buf[_F:_F + 3]
+    acc = buf[_A:_A + 3]
+    uu = buf[_UU:_UU + 3]
+    au = buf[_AU]
+    inv = buf[_INV]
+    qq = buf[_Q]
+    hh = buf[_H]
+    bx, by, bz = bfield[0], bfield[1], bfield[2]
     for j in range(j0, j1):
         nb = j * nx
         sb = j * (nx - 1)
-        for i in range(nx - 1):
-            a = nb + i
-            dx = xx[a + 1] - xx[a]
-            dy = xy[a + 1] - xy[a]
-            dz = xz[a + 1] - xz[a]
-            c, alpha_t[sb + i] = segment_tension(dx, dy, dz, il_w, alpha_c[sb + i], coef[sb + i],
-                                                 kind, fung_h, u_crit, rate)
-            twp[0, i + 1] = c * dx
-            twp[1, i + 1] = c * dy
-            twp[2, i + 1] = c * dz
+        e = nb + nx
+        _tensions(xx[nb:e - 1], xy[nb:e - 1], xz[nb:e - 1], xx[nb + 1:e], xy[nb + 1:e],
+                  xz[nb + 1:e], nx - 1, il_w, alpha_c[sb:sb + nx - 1],
+                  alpha_t[sb:sb + nx - 1], coef[sb:sb + nx - 1], kind, fung_h, u_crit, rate,
+                  buf, twp[:, 1:], True)
         if j < ny - 1:
-            _fill_row(xx, xy, xz, j, nx, nw, il_f, alpha_c, alpha_t, coef, kind, fung_h, u_crit,
-                      rate, tu, True)
+            _tensions(xx[nb:e], xy[nb:e], xz[nb:e], xx[e:e + nx], xy[e:e + nx], xz[e:e + nx],
+                      nx, il_f, alpha_c[nw + nb:nw + e], alpha_t[nw + nb:nw + e],
+                      coef[nw + nb:nw + e], kind, fung_h, u_crit, rate, buf, tu, True)
         else:
             tu[:, :nx] = 0.0
+        m = mass[nb:e]
+        im = inv_mass[nb:e]
+        zk = prev[2, nb:e]
+        q = charge[nb:e]
         for i in range(nx):
-            # one difference per node and direction (mirror-exact assembly)
-            fx = (twp[0, i + 1] - twp[0, i]) + (tu[0, i] - td[0, i])
-            fy = (twp[1, i + 1] - twp[1, i]) + (tu[1, i] - td[1, i])
-            fz = (twp[2, i + 1] - twp[2, i]) + (tu[2, i] - td[2, i])
-            _advance(nb + i, fx, fy, fz, prev, x0, v0, f0, mass, inv_mass, charge, phi, dt,
-                     efield, bfield, region, z0, grav, skip_err, x1, v1, f1, err_num, err_den)
+            # the field acts on the node where it is (uniform, or the half-space z < z0)
+            qq[i] = q[i] if in_field(zk[i], region, z0) else 0.0
+            hh[i] = dt * im[i]
+        for c in range(3):
+            fc = f[c]
+            tw = twp[c]
+            tuc = tu[c]
+            tdc = td[c]
+            g = grav[c]
+            ef = efield[c]
+            # yarn force, one difference per node and direction (mirror-exact assembly),
+            # then the electric part of eq. 2.7 and gravity
+            for i in range(nx):
+                fc[i] = ((tw[i + 1] - tw[i]) + (tuc[i] - tdc[i])) + (m[i] * g + qq[i] * ef)
+            ac = acc[c]
+            v0c = v0[c, nb:e]
+            f0c = f0[c, nb:e]
+            for i in range(nx):
+                ac[i] = v0c[i] + hh[i] * (phi * fc[i] + (1.0 - phi) * f0c[i])
+        # magnetic part implicit in v1: v1 − v1 × u = a with u = φΔt q B / m (solved exactly)
+        ux, uy, uz = uu[0], uu[1], uu[2]
+        ax, ay, az = acc[0], acc[1], acc[2]
+        for i in range(nx):
+            beta = phi * hh[i] * qq[i]
+            ux[i] = beta * bx
+            uy[i] = beta * by
+            uz[i] = beta * bz
+        for i in range(nx):
+            au[i] = ax[i] * ux[i] + ay[i] * uy[i] + az[i] * uz[i]
+            inv[i] = 1.0 / (1.0 + ux[i] * ux[i] + uy[i] * uy[i] + uz[i] * uz[i])
+        vx, vy, vz = v1[0, nb:e], v1[1, nb:e], v1[2, nb:e]
+        for i in range(nx):
+            vx[i] = (ax[i] + (ay[i] * uz[i] - az[i] * uy[i]) + au[i] * ux[i]) * inv[i]
+            vy[i] = (ay[i] + (az[i] * ux[i] - ax[i] * uz[i]) + au[i] * uy[i]) * inv[i]
+            vz[i] = (az[i] + (ax[i] * uy[i] - ay[i] * ux[i]) + au[i] * uz[i]) * inv[i]
+        fx, fy, fz = f[0], f[1], f[2]
+        gx, gy, gz = f1[0, nb:e], f1[1, nb:e], f1[2, nb:e]
+        for i in range(nx):
+            gx[i] = fx[i] + qq[i] * (vy[i] * bz - vz[i] * by)
+            gy[i] = fy[i] + qq[i] * (vz[i] * bx - vx[i] * bz)
+            gz[i] = fz[i] + qq[i] * (vx[i] * by - vy[i] * bx)
+        for c in range(3):
+            x0c = x0[c, nb:e]
+            v0c = v0[c, nb:e]
+            v1c = v1[c, nb:e]
+            x1c = x1[c, nb:e]
+            for i in range(nx):
+                x1c[i] = x0c[i] + dt * (phi * v1c[i] + (1.0 - phi) * v0c[i])
+        # error measure terms (3.10 step 5a); contact candidates are measured after contact
+        px, py, pz = x1[0, nb:e], x1[1, nb:e], x1[2, nb:e]
+        kx, ky, kz = xx[nb:e], xy[nb:e], xz[nb:e]
+        sx, sy, sz = x0[0, nb:e], x0[1, nb:e], x0[2, nb:e]
+        skip = skip_err[nb:e]
+        en = err_num[nb:e]
+        ed = err_den[nb:e]
+        for i in range(nx):
+            keep = 1.0 - skip[i]
+            dx = px[i] - kx[i]
+            dy = py[i] - ky[i]
+            dz = pz[i] - kz[i]
+            en[i] = keep * math.sqrt(dx * dx + dy * dy + dz * dz)
+            dx = px[i] - sx[i]
+            dy = py[i] - sy[i]
+            dz = pz[i] - sz[i]
+            ed[i] = keep * math.sqrt(dx * dx + dy * dy + dz * dz)
         tu, td = td, tu
 
 
@@ -165,7 +210,7 @@ def fused_iterate(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kin
     """Yarn tensions at `prev` and the φ-update of every node (serial, all rows in one block).
 
     Rest lengths are uniform per yarn family on the regular grid (inv_l02[0]: warp, inv_l02[-1]:
-    fill). rowbuf: (blocks, 9, nx + 1), only block 0 used here.
+    fill). rowbuf: (blocks, ROWBUF_ROWS, nx + 1), only block 0 used here.
     """
     _row_block(0, ny, prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind, fung_h,
                u_crit, rate, mass, inv_mass, charge, phi, dt, efield, bfield, region, z0, grav,

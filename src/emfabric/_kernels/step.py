@@ -52,8 +52,8 @@ def _nodes_inside(x, inv_mass, flag, centre, radius):
 def fabric_iterate(grid, fab, mat, fld, prev, x0, v0, f0, alpha_c, skip_err, cur, v1, f1,
                    alpha_t, t_seg, err, phi, dt):
     """One force evaluation + node update: yarn tensions and damage at the iterate `prev`, then
-    the φ-update of every node into (cur, v1, f1). t_seg: row buffers (blocks, 9, nx + 1), more
-    than one block runs the threaded kernel; err = (per-row
+    the φ-update of every node into (cur, v1, f1). t_seg: row buffers, shape
+    (blocks, ROWBUF_ROWS, nx + 1); more than one block runs the threaded kernel. err = (per-row
     sums (2, ny), per-node scratch (node_count,), per-node scratch (node_count,))."""
     err_rows, err_num, err_den = err
     nx, ny = grid

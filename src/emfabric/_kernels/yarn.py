@@ -3,7 +3,7 @@
 The tension vector of segment s is the force its first node feels, t_s = (S·A0/L0)·d with
 d = x_b − x_a: from ψ = U·S·A0 along d/L and U = L/L0, so no square root is needed for the force.
 Segments are numbered warp first (s = j·(nx−1) + i joins nodes a = j·nx + i and a + 1), then
-fill (s = warp_count + a joins a and a + nx). The grid loop lives in nodes.fused_iterate.
+fill (s = warp_count + a joins a and a + nx). The grid loops live in nodes.py.
 """
 
 import math
@@ -20,17 +20,6 @@ def _stress_factor(u2, kind, fung_h):
     if kind == MATERIAL_FUNG:
         return fung_h * e * math.exp(0.5 * fung_h * e * e)
     return e
-
-
-@njit(cache=True, inline="always")
-def segment_tension(dx, dy, dz, inv_l02, alpha_c, coef, kind, fung_h, u_crit, rate):
-    """(tension factor S·A0/L0 [N/m], trial α) of a segment with end difference d."""
-    u2 = (dx * dx + dy * dy + dz * dz) * inv_l02
-    alpha = alpha_c
-    # damage, eq. 2.6: irreversible, only past the critical stretch
-    if u2 > u_crit * u_crit and rate > 0.0:
-        alpha = min(alpha, math.exp(-rate * (math.sqrt(u2) - u_crit) / u_crit))
-    return alpha * coef * _stress_factor(u2, kind, fung_h), alpha
 
 
 @njit(cache=True)
