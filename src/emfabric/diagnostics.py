@@ -53,8 +53,8 @@ def fabric_diagnostics(model: Model, state: State, coef: np.ndarray) -> np.ndarr
     """Packed fabric diagnostics (see emfabric._kernels.diagnostics for the layout)."""
     out = np.empty(_k.COUNT)
     centre = state.body_x if model.has_body else np.zeros(3)
-    _k.fabric_diagnostics(state.node_x, state.node_v, model.node_x0, model.node_mass,
-                          model.seg_nodes, state.seg_alpha, coef, model.seg_rest_length,
+    _k.fabric_diagnostics(state.node_x, state.node_v, model.node_x0, model.node_mass, model.nx,
+                          model.ny, state.seg_alpha, coef, model.seg_rest_length,
                           model.material_kind, model.fung_H, model.broken_below, centre,
                           flight_direction(model), out)
     return out

@@ -14,7 +14,30 @@ COUNT = 16
 
 
 @njit(cache=True)
-def fabric_diagnostics(x, v, xref, mass, seg_nodes, alpha, coef, rest, kind, fung_h,
+def _yarn_stats(x, a0, count, step, s0, alpha, coef, rest2, kind, fung_h, broken_below, stats):
+    """Max U², strain energy, broken count and min α of `count` consecutive segments s0 + k
+    joining a0 + k and a0 + k + step, merged into stats."""
+    xx, xy, xz = x[0], x[1], x[2]
+    il2 = 1.0 / rest2
+    u2max, strain, broken, amin = stats
+    for k in range(count):
+        a = a0 + k
+        b = a + step
+        s = s0 + k
+        dx = xx[b] - xx[a]
+        dy = xy[b] - xy[a]
+        dz = xz[b] - xz[a]
+        u2 = (dx * dx + dy * dy + dz * dz) * il2
+        u2max = max(u2max, u2)
+        al = alpha[s]
+        strain += al * coef[s] * rest2 * strain_energy_density(u2, kind, fung_h)
+        broken += 1.0 if al < broken_below else 0.0
+        amin = min(amin, al)
+    return u2max, strain, broken, amin
+
+
+@njit(cache=True)
+def fabric_diagnostics(x, v, xref, mass, nx, ny, alpha, coef, rest, kind, fung_h,
                        broken_below, centre, direction, out):
     """Kinetic energy, momentum, angular momentum (about the origin), max |Δz|, max stretch,
     strain energy, broken yarns, min α, and the nodes' extent/speed along the flight direction.
@@ -47,22 +70,15 @@ def fabric_diagnostics(x, v, xref, mass, seg_nodes, alpha, coef, rest, kind, fun
         vd = vx * direction[0] + vy * direction[1] + vz * direction[2]
         approach = max(approach, -vd)
         recede = max(recede, vd)
-    strain = 0.0
-    u2max = 0.0
-    broken = 0
-    amin = 1.0
-    for s in range(seg_nodes.shape[0]):
-        a = seg_nodes[s, 0]
-        b = seg_nodes[s, 1]
-        u2 = ((x[0, b] - x[0, a]) ** 2 + (x[1, b] - x[1, a]) ** 2
-              + (x[2, b] - x[2, a]) ** 2) / (rest[s] * rest[s])
-        if u2 > u2max:
-            u2max = u2
-        strain += alpha[s] * coef[s] * rest[s] * rest[s] * strain_energy_density(u2, kind, fung_h)
-        if alpha[s] < broken_below:
-            broken += 1
-        if alpha[s] < amin:
-            amin = alpha[s]
+    # rest lengths are uniform per family on the grid: warp rows, then the fill block
+    nw = ny * (nx - 1)
+    stats = (0.0, 0.0, 0.0, 1.0)
+    for j in range(ny):
+        stats = _yarn_stats(x, j * nx, nx - 1, 1, j * (nx - 1), alpha, coef, rest[0] ** 2, kind,
+                            fung_h, broken_below, stats)
+    stats = _yarn_stats(x, 0, (ny - 1) * nx, nx, nw, alpha, coef, rest[rest.shape[0] - 1] ** 2,
+                        kind, fung_h, broken_below, stats)
+    u2max, strain, broken, amin = stats
     out[KE] = ke
     out[PX] = p[0]
     out[PY] = p[1]

@@ -22,7 +22,7 @@ def _stress_factor(u2, kind, fung_h):
     return e
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def strain_energy_density(u2, kind, fung_h):
     """Stored energy per unit reference volume divided by the modulus (𝔼 or c), relaxed."""
     if u2 <= 1.0:
