@@ -61,7 +61,7 @@ def step_factor(error: float, k: int, tol: float, k_target: int, p: float) -> fl
     return tol ** (1.0 / (p * k_target)) / error ** (1.0 / (p * k))
 
 
-THREADS_FROM_NODES = 200 * 200
+THREADS_FROM_NODES = 32 * 32
 """Sheets with at least this many nodes use the two-thread kernel."""
 
 
