@@ -21,17 +21,35 @@ def in_field(z, region, z0):
     return region != REGION_HALF_SPACE or z < z0
 
 
-@njit(cache=True, fastmath={"reassoc", "nsz"})
+@njit(cache=True)
 def _row_sums(err_num, err_den, nx, ny, err_rows):
-    """Per-row sums of the error terms (only these sums may be reassociated)."""
+    """Per-row sums of the error terms in a fixed order (four interleaved partial sums).
+
+    No fastmath here: a reassociated reduction may be vectorised differently when compiled
+    afresh or loaded from Numba's cache, and a last-bit change of ϖ changes Δt and so the run.
+    """
     for j in range(ny):
-        a = 0.0
-        b = 0.0
-        for i in range(j * nx, (j + 1) * nx):
-            a += err_num[i]
-            b += err_den[i]
-        err_rows[0, j] = a
-        err_rows[1, j] = b
+        a0 = a1 = a2 = a3 = 0.0
+        b0 = b1 = b2 = b3 = 0.0
+        start = j * nx
+        stop = start + nx
+        i = start
+        while i + 3 < stop:
+            a0 += err_num[i]
+            a1 += err_num[i + 1]
+            a2 += err_num[i + 2]
+            a3 += err_num[i + 3]
+            b0 += err_den[i]
+            b1 += err_den[i + 1]
+            b2 += err_den[i + 2]
+            b3 += err_den[i + 3]
+            i += 4
+        while i < stop:
+            a0 += err_num[i]
+            b0 += err_den[i]
+            i += 1
+        err_rows[0, j] = (a0 + a1) + (a2 + a3)
+        err_rows[1, j] = (b0 + b1) + (b2 + b3)
 
 
 # rows of a block's row buffer, shape (ROWBUF_ROWS, nx + 1)
