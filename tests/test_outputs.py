@@ -3,6 +3,7 @@
 import subprocess
 import sys
 import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -138,3 +139,25 @@ def test_history_record_matches_diagnostics(small_run):
         assert float(last[name]) == st.energy[i]
     ke_f = 0.5 * float((m.node_mass * (st.node_v**2).sum(axis=0)).sum())
     assert float(last.kinetic_energy_fabric) == pytest.approx(ke_f, rel=1e-12)
+
+
+def test_kernel_caches_dropped_when_any_kernel_source_changes(tmp_path):
+    """A change to any kernel module invalidates every cached kernel (Numba alone would keep a
+    cached caller with the old callee inlined)."""
+    import shutil
+
+    import emfabric._kernels as k
+
+    pkg = tmp_path / "_kernels"
+    shutil.copytree(Path(k.__file__).parent, pkg, ignore=shutil.ignore_patterns("__pycache__"))
+    cache = pkg / "__pycache__"
+    code = ("import importlib.util, sys; spec = importlib.util.spec_from_file_location("
+            f"'kcheck', {str(pkg / '__init__.py')!r}); m = importlib.util.module_from_spec(spec); "
+            "spec.loader.exec_module(m)")
+    subprocess.run([sys.executable, "-c", code], check=True)
+    (cache / "step.attempt_step-1.py311.nbi").write_text("stale")
+    subprocess.run([sys.executable, "-c", code], check=True)
+    assert (cache / "step.attempt_step-1.py311.nbi").exists()  # unchanged sources: kept
+    (pkg / "nodes.py").write_text((pkg / "nodes.py").read_text() + "\n# edited\n")
+    subprocess.run([sys.executable, "-c", code], check=True)
+    assert not (cache / "step.attempt_step-1.py311.nbi").exists()  # a callee changed: dropped
