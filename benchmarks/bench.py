@@ -1,0 +1,710 @@
+"""emfabric speed suite: ``python benchmarks/bench.py`` prints one table (see benchmarks/README.md).
+
+(a) one force evaluation + node update (``fabric_iterate``) on a deformed 100×100 and 1000×1000
+    sheet, in ns per segment, against the same evaluation in NVIDIA Warp on its CPU device;
+(b) the paper-field full run, warm, and where its time goes;
+(c) start-up: a fresh process up to its first accepted step, with a cold and a warm Numba cache;
+(d) memory per node and peak resident memory.
+``--schemes`` instead compares the solver schemes on paper-field against a tight reference.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import functools
+import gc
+import json
+import math
+import os
+import platform
+import re
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+SCENARIO = "paper-field"
+# the realistic state of (a): a smooth dent of the sheet centre, moving, in physical units
+BUMP_DEPTH = 0.03  # [m]
+BUMP_RADIUS = 0.09  # [m]; yarns outside stay slack (the wave has not reached them yet)
+BUMP_SPEED = 150.0  # [m/s] at the centre, along −z like the projectile
+DT = 4e-8  # [s], about the step the paper-field run settles at
+STARTUP_END_TIME = 2e-6  # [s] of the short runs that time start-up
+TARGETS = {"ns_100": 5.0, "warp_speedup": 4.0, "ns_1000": 5.0, "run_wall": 5.0, "start": 3.0}
+
+
+# --- helpers -------------------------------------------------------------------------------
+
+def say(text: str = "") -> None:
+    print(text, flush=True)
+
+
+def best_and_median(fn, repeats: int, target_s: float = 0.25) -> tuple[float, float]:
+    """Seconds per call of fn(count) / count: best and median of `repeats` samples."""
+    t0 = time.perf_counter()
+    fn(1)
+    once = time.perf_counter() - t0
+    count = max(1, int(target_s / max(once, 1e-7)))
+    samples = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn(count)
+        samples.append((time.perf_counter() - t0) / count)
+    return min(samples), statistics.median(samples)
+
+
+def child(mode: str, *args: str, env: dict[str, str] | None = None) -> dict:
+    """Run this script's child mode in a fresh interpreter; its last stdout line is JSON."""
+    full_env = dict(os.environ, **(env or {}))
+    full_env["EMFABRIC_BENCH_LAUNCH"] = repr(time.time())
+    out = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child", mode,
+                          *args], env=full_env, capture_output=True, text=True)
+    if out.returncode != 0:
+        lines = [re.sub(r"\x1b\[[0-9;]*m", "", x).strip() for x in out.stderr.splitlines()]
+        errors = [x for x in lines if "Error" in x] or [x for x in lines if x] or ["no output"]
+        raise RuntimeError(f"child '{mode}' failed: {errors[-1][:300]}")
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def cpu_snapshot() -> tuple[float, float, float]:
+    """(CPU seconds of the whole machine, of this process and its children, wall time)."""
+    try:
+        ticks = [int(v) for v in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:9]]
+        busy = (sum(ticks) - ticks[3] - ticks[4]) / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError):
+        busy = math.nan
+    t = os.times()
+    return busy, t.user + t.system + t.children_user + t.children_system, time.perf_counter()
+
+
+def other_cpu(start: tuple[float, float, float]) -> float:
+    """Cores other processes kept busy on average since `start` (nan where unknown)."""
+    busy, own, wall = cpu_snapshot()
+    return max(0.0, (busy - start[0]) - (own - start[1])) / (wall - start[2])
+
+
+def busy_note(start: tuple[float, float, float]) -> None:
+    """Say so when other processes took CPU time during a section."""
+    busy = other_cpu(start)
+    if busy >= 0.1:
+        say(f"    ! other processes used {busy:.2f} cores on average during this section: "
+            "its figures may be perturbed")
+
+
+def machine() -> list[str]:
+    import numba
+
+    cpu = platform.processor() or "unknown"
+    flags: set[str] = set()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+            elif line.startswith("flags"):
+                flags = set(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    simd = " ".join(f for f in ("avx2", "fma", "avx512f") if f in flags) or "-"
+    usable = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    try:
+        import warp
+
+        warp_version = warp.__version__
+    except ImportError:
+        warp_version = "not installed"
+    try:
+        tree = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=HERE,
+                              capture_output=True, text=True).stdout.strip() or "unknown"
+    except OSError:
+        tree = "unknown"
+    return [
+        f"CPU: {cpu} ({simd}), {os.cpu_count()} cores, {usable} usable; source tree {tree}",
+        f"Python {platform.python_version()}, numpy {np.__version__}, numba {numba.__version__} "
+        f"(NUMBA_NUM_THREADS = {numba.config.NUMBA_NUM_THREADS}), warp-lang {warp_version}",
+    ]
+
+
+# --- (a) one evaluation ------------------------------------------------------------------
+
+def deformed_sheet(n: int):
+    """A paper-field n×n sheet (no projectile) dented and moving: (model, integrator, state)."""
+    from emfabric import load_scenario
+    from emfabric.builder import build_model
+    from emfabric.integrator import Integrator, initial_forces
+
+    sc = load_scenario(SCENARIO, {"fabric.nodes": [n, n], "projectile.shape": "none"})
+    model = build_model(sc)
+    integ = Integrator(model)
+    s = model.state()
+    rho2 = (s.node_x[0] ** 2 + s.node_x[1] ** 2) / BUMP_RADIUS**2
+    shape = np.where(rho2 < 1.0, (1.0 - rho2) ** 2, 0.0) * (model.node_inv_mass > 0)
+    s.node_x[2] = -BUMP_DEPTH * shape
+    s.node_v[2] = -BUMP_SPEED * shape
+    initial_forces(model, s)  # ψ(t) of the dented state
+    return model, integ, s
+
+
+def stretch(model, x: np.ndarray) -> np.ndarray:
+    """Stretch U = L/L0 of every segment at positions x, shape (seg_count,)."""
+    a, b = model.seg_nodes[:, 0], model.seg_nodes[:, 1]
+    return np.sqrt(np.sum((x[:, b] - x[:, a]) ** 2, axis=0)) / model.seg_rest_length
+
+
+def iterate_args(integ, s, s2, dt: float) -> tuple:
+    """fabric_iterate's arguments for one iterate from state s into s2, in the integrator's own
+    workspace (its layout is the kernel's business): the first iterate of a step at dt."""
+    xbuf, t_work, err_work, _cand, flag, *_ = integ.work
+    xbuf[:] = s.node_x
+    return (integ.grid, integ.fab, integ.mat, integ.fld, xbuf, s.node_x, s.node_v, s.node_f,
+            s.seg_alpha, flag, s2.node_x, s2.node_v, s2.node_f, s2.seg_alpha, t_work, err_work,
+            integ.phi, dt)
+
+
+@functools.cache
+def _compiled_repeat():
+    """fabric_iterate called `count` times from compiled code (no Python dispatch per call)."""
+    from numba import njit
+
+    from emfabric._kernels.step import fabric_iterate
+
+    @njit
+    def repeat(count, grid, fab, mat, fld, prev, x0, v0, f0, alpha_c, skip_err, cur, v1, f1,
+               alpha_t, t_work, err_work, phi, dt):
+        for _ in range(count):
+            fabric_iterate(grid, fab, mat, fld, prev, x0, v0, f0, alpha_c, skip_err, cur, v1,
+                           f1, alpha_t, t_work, err_work, phi, dt)
+
+    return repeat
+
+
+def _triad_bandwidth(threads: int, repeats: int) -> float:
+    """STREAM-triad bandwidth [B/s] (3 arrays of 64 MiB, write-allocate not counted)."""
+    import numba
+    from numba import njit, prange
+
+    @njit(parallel=True)
+    def triad(count, a, b, c):
+        for _ in range(count):
+            for i in prange(a.size):
+                a[i] = b[i] + 0.5 * c[i]
+
+    size = 1 << 23
+    a, b, c = np.zeros(size), np.ones(size), np.ones(size)
+    numba.set_num_threads(threads)
+    best, _ = best_and_median(lambda k: triad(k, a, b, c), repeats)
+    return 3 * 8 * size / best
+
+
+def bench_evaluation(n: int, threads: list[int], repeats: int, use_warp: bool) -> dict:
+    """Time one fabric_iterate on the dented n×n sheet, and Warp's version of it."""
+    import numba
+
+    from emfabric._kernels.step import fabric_iterate
+
+    model, integ, s = deformed_sheet(n)
+    s2 = s.copy()
+    args = iterate_args(integ, s, s2, DT)
+    xbuf, err_work, flag = args[4], args[15], args[9]
+    err_rows = err_work[0] if isinstance(err_work, tuple) else err_work
+    flag[:] = 0  # no contact candidates: every free node counts in the error measure
+    fabric_iterate(*args)
+    segs, nodes = model.seg_count, model.node_count
+    u = stretch(model, s.node_x)
+    res = {"n": n, "segs": segs, "nodes": nodes, "tension": np.mean(u > 1.0),
+           "past_crit": np.mean(u > model.critical_stretch), "max_u": u.max()}
+    # compulsory memory traffic: every input read once, every output written once
+    reads = sum(x.nbytes for x in (xbuf, s.node_x, s.node_v, s.node_f, s.seg_alpha, flag,
+                                   *integ.fab))
+    writes = sum(x.nbytes for x in (s2.node_x, s2.node_v, s2.node_f, s2.seg_alpha))
+    res["bytes_per_seg"] = (reads + writes) / segs
+
+    repeat = _compiled_repeat()
+    res["emf"] = {}
+    for k in threads:
+        numba.set_num_threads(k)
+        best, med = best_and_median(lambda c: repeat(c, *args), repeats)
+        res["emf"][k] = (best, med)
+    numba.set_num_threads(threads[0])
+
+    def python_calls(count):
+        for _ in range(count):
+            fabric_iterate(*args)
+
+    res["emf_python"] = best_and_median(python_calls, repeats)
+
+    res["warp"] = None
+    if use_warp:
+        import warp_kernels as wk
+
+        ev = wk.WarpEvaluation(integ.grid, integ.fab, integ.mat, integ.fld, xbuf, s.node_x,
+                               s.node_v, s.node_f, s.seg_alpha, flag, integ.phi, DT)
+        ev.evaluate()
+        theirs = ev.results()
+        ours = {"alpha_t": s2.seg_alpha, "x1": s2.node_x, "v1": s2.node_v,
+                "f1": s2.node_f, "err_rows": err_rows}
+        diffs = {k: float(np.max(np.abs(theirs[k] - v)) / max(np.max(np.abs(v)), 1e-300))
+                 for k, v in ours.items()}
+        worst = max(diffs, key=diffs.get)
+        res["warp_diff"] = (worst, diffs[worst])
+
+        def warp_calls(count):
+            for _ in range(count):
+                ev.evaluate()
+
+        res["warp"] = best_and_median(warp_calls, repeats)
+    return res
+
+
+def print_evaluations(rows: list[dict], threads: list[int], warp_note: str,
+                      bandwidth: dict[int, float]) -> None:
+    say("(a) one force evaluation + node update (fabric_iterate) on a dented, moving sheet")
+    say(f"    state: reference grid + centre dent {BUMP_DEPTH * 1e3:g} mm deep over r < "
+        f"{BUMP_RADIUS * 1e3:g} mm, v_z up to {BUMP_SPEED:g} m/s, Δt = {DT:g} s")
+    say("    times: best (median) of the samples; emfabric called in a compiled loop")
+    head = (f"    {'grid':>9} {'segments':>9} {'thr':>3} | {'emfabric ns/seg':>16} "
+            f"{'µs/eval':>8} | {'Warp CPU ns/seg':>16} {'µs/eval':>8} | {'Warp ÷ emfabric':>15}")
+    say(head)
+    say("    " + "-" * (len(head) - 4))
+    for r in rows:
+        for k in threads:
+            best, med = r["emf"][k]
+            warp = r["warp"]
+            if warp is None:
+                wcol, ratio = f"{'n/a':>16} {'':>8}", f"{'n/a':>15}"
+            else:
+                wcol = (f"{warp[0] / r['segs'] * 1e9:7.2f} ({warp[1] / r['segs'] * 1e9:6.2f})"
+                        f" {warp[0] * 1e6:8.1f}")
+                ratio = f"{warp[0] / best:14.2f}×"
+            say(f"    {r['n']:>4}×{r['n']:<4} {r['segs']:>9} {k:>3} | "
+                f"{best / r['segs'] * 1e9:7.2f} ({med / r['segs'] * 1e9:6.2f}) "
+                f"{best * 1e6:8.1f} | {wcol} | {ratio}")
+    if any(r["warp"] for r in rows) and len(threads) > 1:
+        say("    Warp's CPU device runs a launch on one thread: the same figure in both rows.")
+    if warp_note:
+        say(f"    {warp_note}")
+    for r in rows:
+        say(f"    {r['n']}×{r['n']}: {100 * r['tension']:.0f}% of yarns in tension, "
+            f"{100 * r['past_crit']:.0f}% past U_crit, max stretch {r['max_u']:.3f}")
+        if r.get("warp_diff"):
+            name, d = r["warp_diff"]
+            say(f"      Warp vs emfabric: max relative difference {d:.2e} (in {name})"
+                + ("" if d <= 1e-12 else "  <- above 1e-12: CHECK"))
+        say(f"      fabric_iterate called from Python (dispatch included): "
+            f"{r['emf_python'][0] * 1e6:.1f} µs/eval")
+        line = (f"      compulsory traffic {r['bytes_per_seg']:.0f} B/segment "
+                f"({r['bytes_per_seg'] * r['segs'] / 2**20:.0f} MiB per evaluation)")
+        if bandwidth:
+            floors = ", ".join(f"{r['bytes_per_seg'] / bw * 1e9:.2f} ({k} thr)"
+                               for k, bw in sorted(bandwidth.items()))
+            line += f"; from DRAM at triad speed ≥ {floors} ns/seg"
+        say(line)
+    if bandwidth:
+        say("    STREAM triad: " + ", ".join(f"{bw / 1e9:.1f} GB/s on {k} thread(s)"
+                                             for k, bw in sorted(bandwidth.items())))
+
+
+# --- (b) full run --------------------------------------------------------------------------
+
+def _step_loop(sc, steps: int, samples: list | None):
+    """The run's steps as a bare Integrator.step loop (no recording): (seconds, model, integ);
+    appends 10 evenly spaced (state, candidate flags) pairs to `samples` when given one."""
+    from emfabric.builder import build_model
+    from emfabric.integrator import Integrator
+
+    t_end = sc.solver.end_time
+    keep_at = set(np.linspace(max(1, steps // 10), steps, 10, dtype=int).tolist())
+    t0 = time.perf_counter()
+    model = build_model(sc)
+    integ = Integrator(model)
+    s_in = model.state()
+    s_out = s_in.copy()
+    flag = integ.work[4]
+    while s_in.steps < steps:
+        integ.step(s_in, s_out, dt_limit=t_end - s_in.t)
+        s_in, s_out = s_out, s_in
+        if samples is not None and s_in.steps in keep_at:
+            samples.append((s_in.copy(), flag.copy()))
+    return time.perf_counter() - t0, model, integ
+
+
+def bench_full_run(runs: int, repeats: int, base: dict) -> dict:
+    from emfabric import load_scenario
+    from emfabric import run as run_scenario
+
+    sc = load_scenario(SCENARIO, base)
+    run_scenario(load_scenario(SCENARIO, {**base, "solver.end_time": STARTUP_END_TIME}))
+    # runs and bare step loops alternate, so that a drift of the machine's speed hits both
+    summaries, loops, samples = [], [], []
+    for i in range(runs):
+        gc.collect()
+        summaries.append(run_scenario(sc).summary)
+        gc.collect()
+        loop, model, integ = _step_loop(sc, summaries[0]["steps"], samples if i == 0 else None)
+        loops.append(loop)
+    # one evaluation timed on the states sampled along the run (contact candidates as that
+    # step left them): the run's own mix of slack, stretched and damaging yarns
+    per_eval, tension, past = [], [], []
+    flag = integ.work[4]
+    for st, fl in samples:
+        flag[:] = fl
+        args = iterate_args(integ, st, st.copy(), st.dt)
+        per_eval.append(best_and_median(lambda c, a=args: _compiled_repeat()(c, *a),
+                                        max(3, repeats // 2), target_s=0.1)[0])
+        u = stretch(model, st.node_x)
+        tension.append(np.mean(u > 1.0))
+        past.append(np.mean(u > model.critical_stretch))
+    return {"summaries": summaries, "loops": loops, "loop_steps": summaries[0]["steps"],
+            "loop_evals": summaries[0]["force_evaluations"], "segs": model.seg_count,
+            "eval": float(np.mean(per_eval)), "eval_range": (min(per_eval), max(per_eval)),
+            "tension": (min(tension), max(tension)), "past_crit": (min(past), max(past)),
+            "samples": len(samples)}
+
+
+def print_full_run(fr: dict) -> None:
+    s = fr["summaries"][0]
+    walls = [x["wall_time_s"] for x in fr["summaries"]]
+    best, med = min(walls), statistics.median(walls)
+    ev, steps = s["force_evaluations"], s["steps"]
+    say(f"(b) full '{SCENARIO}' run (100×100 sheet, sphere, B field; JIT warm), "
+        f"best (median) of {len(walls)}")
+    say(f"    emfabric.run wall time        {best:8.2f} s ({med:.2f} s) to t = "
+        f"{s['time_s'] * 1e6:.0f} µs ({s['end_reason']})")
+    say(f"    accepted / rejected steps     {steps:8d} / {s['rejected_steps']}")
+    say(f"    force evaluations             {ev:8d} (mean iterations {s['mean_iterations']:.2f})")
+    say(f"    wall time per evaluation      {best / ev * 1e6:8.0f} µs "
+        f"({best / ev / fr['segs'] * 1e9:.1f} ns/segment); per step {best / steps * 1e6:.0f} µs")
+    lb = min(fr["loops"])
+    say(f"    bare Integrator.step loop     {lb:8.2f} s ({statistics.median(fr['loops']):.2f} s; "
+        f"{fr['loop_steps']} steps, {fr['loop_evals']} evaluations, no recording)")
+    say(f"    recording + run loop          {best - lb:8.2f} s ({(best - lb) / steps * 1e6:.0f} "
+        "µs/step)")
+    kern = ev * fr["eval"]
+    say(f"    fabric_iterate share          {kern:8.2f} s = {100 * kern / best:.0f}% "
+        f"(evaluations × {fr['eval'] * 1e6:.0f} µs, the mean over {fr['samples']} states")
+    lo, hi = fr["eval_range"]
+    say(f"{'':36}along the run: {lo * 1e6:.0f}–{hi * 1e6:.0f} µs; "
+        f"{100 * fr['tension'][0]:.0f}–{100 * fr['tension'][1]:.0f}% of yarns in tension, "
+        f"{100 * fr['past_crit'][0]:.0f}–{100 * fr['past_crit'][1]:.0f}% past U_crit)")
+    say(f"    rest of Integrator.step       {lb - kern:8.2f} s "
+        f"({(lb - kern) / steps * 1e6:.0f} µs/step: contact, body, energy, step control)")
+
+
+# --- (c) start-up ------------------------------------------------------------------------
+
+def child_startup() -> dict:
+    """In a fresh interpreter: import, then a short paper-field run twice."""
+    launch = float(os.environ["EMFABRIC_BENCH_LAUNCH"])
+    import emfabric.cli  # noqa: F401  (the command line's own imports: typer, rich)
+    from emfabric import load_scenario
+    from emfabric import run as run_scenario
+
+    t_import = time.time() - launch
+    first: list[float] = []
+
+    def progress(state, info) -> None:
+        if not first:
+            first.append(time.time() - launch)
+
+    sc = load_scenario(SCENARIO, {"solver.end_time": STARTUP_END_TIME})
+    t0 = time.perf_counter()
+    run_scenario(sc, progress=progress)
+    run1 = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    run_scenario(sc)
+    run2 = time.perf_counter() - t0
+    return {"import": t_import, "first_step": first[0], "run1": run1, "run2": run2}
+
+
+def bench_startup(cold: bool) -> dict:
+    res = {}
+    if cold:
+        with tempfile.TemporaryDirectory() as cache:
+            res["cold"] = child("startup", env={"NUMBA_CACHE_DIR": cache})
+    warm = [child("startup") for _ in range(3)]  # the first may refresh a stale cache
+    res["warm"] = min(warm[1:], key=lambda r: r["first_step"])
+    with tempfile.TemporaryDirectory() as out:
+        cmd = [sys.executable, "-m", "emfabric", "run", SCENARIO, "--set",
+               f"solver.end_time={STARTUP_END_TIME}", "--quiet", "--out", out]
+        walls = []
+        for _ in range(3):
+            t0 = time.perf_counter()
+            out = subprocess.run(cmd, capture_output=True, text=True)
+            walls.append(time.perf_counter() - t0)
+            if out.returncode != 0:
+                raise RuntimeError(f"`{' '.join(cmd[1:4])}` failed: {out.stderr.strip()[-200:]}")
+    res["cli"] = min(walls)
+    return res
+
+
+def print_startup(st: dict) -> None:
+    say(f"(c) start-up: fresh process, '{SCENARIO}' with solver.end_time = "
+        f"{STARTUP_END_TIME:g} s (times from process launch)")
+    say(f"    {'Numba cache':<12} {'import s':>9} {'first step s':>13} {'1st run s':>10} "
+        f"{'2nd run s':>10} {'JIT load/compile s':>19}")
+    for name in ("cold", "warm"):
+        if name in st:
+            r = st[name]
+            say(f"    {name:<12} {r['import']:9.2f} {r['first_step']:13.2f} {r['run1']:10.2f} "
+                f"{r['run2']:10.2f} {r['run1'] - r['run2']:19.2f}")
+    say(f"    `python -m emfabric run {SCENARIO} --set solver.end_time={STARTUP_END_TIME:g} "
+        f"--quiet` (warm cache, writes its files): {st['cli']:.2f} s end to end")
+
+
+# --- (d) memory ---------------------------------------------------------------------------
+
+def _array_bytes(obj, seen: set) -> int:
+    """Bytes of the numpy arrays in obj (arrays, tuples, lists), each buffer counted once."""
+    if isinstance(obj, np.ndarray):
+        key = (obj.__array_interface__["data"][0], obj.nbytes)
+        if key in seen:
+            return 0
+        seen.add(key)
+        return obj.nbytes
+    if isinstance(obj, tuple | list):
+        return sum(_array_bytes(o, seen) for o in obj)
+    return 0
+
+
+def peak_rss() -> int:
+    """This process's peak resident memory [B]: VmHWM (reset by exec), else getrusage."""
+    try:
+        for line in Path("/proc/self/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
+def child_memory(n: int) -> dict:
+    """In a fresh interpreter: build the n×n paper-field model, integrator and two states."""
+    from emfabric import load_scenario
+    from emfabric.builder import build_model
+    from emfabric.integrator import Integrator
+
+    rss0 = peak_rss()
+    model = build_model(load_scenario(SCENARIO, {"fabric.nodes": [n, n]}))
+    integ = Integrator(model)
+    s_in = model.state()
+    s_out = s_in.copy()
+    seen: set = set()
+    fields = dataclasses.fields
+    parts = {
+        "model": sum(_array_bytes(getattr(model, f.name), seen) for f in fields(model)),
+        "states": sum(_array_bytes(getattr(st, f.name), seen) for st in (s_in, s_out)
+                      for f in fields(st)),
+        "integrator": sum(_array_bytes(v, seen) for k, v in vars(integ).items()
+                          if k != "model"),
+    }
+    rss = peak_rss()
+    return {"nodes": model.node_count, **parts, "rss": rss, "rss_import": rss0}
+
+
+def print_memory(rows: list[dict]) -> None:
+    say("(d) memory: bytes of the arrays of Model + 2 States (a run's two buffers) + Integrator "
+        "workspace, per node")
+    say(f"    {'grid':>9} {'Model':>7} {'States':>7} {'Integ.':>7} {'total B/node':>13} "
+        f"{'arrays MiB':>11} {'peak RSS MiB':>13} {'RSS after imports':>18}")
+    for r in rows:
+        n = r["nodes"]
+        tot = r["model"] + r["states"] + r["integrator"]
+        side = int(round(n**0.5))
+        say(f"    {side:>4}×{side:<4} {r['model'] / n:7.0f} {r['states'] / n:7.0f} "
+            f"{r['integrator'] / n:7.0f} {tot / n:13.0f} {tot / 2**20:11.1f} "
+            f"{r['rss'] / 2**20:13.0f} {r['rss_import'] / 2**20:18.0f}")
+
+
+# --- schemes ------------------------------------------------------------------------------
+
+def bench_schemes(base: dict) -> None:
+    from emfabric import load_scenario
+    from emfabric import run as run_scenario
+
+    cases = [
+        ("reference: tol 1e-9, dt_max 2e-8", {"solver.tolerance": 1e-9, "solver.dt_max": 2e-8}),
+        ("fixed-point (default, tol 1e-6)", {}),
+        ("anderson", {"solver.scheme": "anderson"}),
+        # how far the reference itself is from converged in Δt
+        ("check: tol 1e-9, dt_max 1e-8", {"solver.tolerance": 1e-9, "solver.dt_max": 1e-8}),
+    ]
+    run_scenario(load_scenario(SCENARIO, {"solver.end_time": STARTUP_END_TIME}))
+    done = {}
+    for name, overrides in cases:
+        gc.collect()  # start each run from the same small heap
+        start = cpu_snapshot()
+        try:
+            res = run_scenario(load_scenario(SCENARIO, {**base, **overrides}))
+        except Exception as err:  # a scheme that is not available (yet)
+            done[name] = f"not run: {type(err).__name__}: {err}"
+            continue
+        h = res.history
+        done[name] = (h["time"].values, h["angular_velocity"].values, h["tilt"].values,
+                      res.summary, other_cpu(start))
+        del res, h
+    runs = {k: v for k, v in done.items() if not isinstance(v, str)}
+    # runs may stop at different times (rebound, perforation): compare at the earliest end
+    t_c = min(float(t[-1]) for t, *_ in runs.values())
+    say(f"Schemes on '{SCENARIO}': ω and max tilt up to t = {t_c * 1e6:.1f} µs (the earliest "
+        "end of these runs) against the first run")
+    say(f"    {'scheme':<34} {'wall s':>7} {'steps':>6} {'evals':>7} {'µs/eval':>8} "
+        f"{'end µs':>7} {'ω_x rad/s':>10} {'|Δω|/|ω_ref|':>13} {'max tilt °':>10} "
+        f"{'Δtilt/tilt':>11}")
+    ref = None
+    for name, _ in cases:
+        if isinstance(done[name], str):
+            say(f"    {name:<34} {done[name]}")
+            continue
+        t, omega, tilt_t, s, busy = done[name]
+        w = np.array([np.interp(t_c, t, omega[:, c]) for c in range(3)])
+        tilt = float(tilt_t[t <= t_c].max())
+        if ref is None:
+            ref = (w, tilt)
+        dw = np.linalg.norm(w - ref[0]) / np.linalg.norm(ref[0])
+        dtilt = abs(tilt - ref[1]) / ref[1]
+        ev = s["force_evaluations"]
+        say(f"    {name:<34} {s['wall_time_s']:7.1f} {s['steps']:6d} {ev:7d} "
+            f"{s['wall_time_s'] / ev * 1e6:8.0f} {s['time_s'] * 1e6:7.1f} {w[0]:10.2f} "
+            f"{dw:13.2e} {np.degrees(tilt):10.3f} {dtilt:11.2e}"
+            + ("" if busy < 0.1 else f"  ! machine busy ({busy:.2f} other cores)"))
+    fp, an = runs.get(cases[1][0]), runs.get(cases[2][0])
+    if fp and an and np.array_equal(fp[1], an[1]):
+        say("    note: 'anderson' gave results identical to fixed-point bit for bit: the option "
+            "is accepted but has no effect")
+
+
+# --- main ---------------------------------------------------------------------------------
+
+def targets(rows: list[dict], fr: dict | None, st: dict | None) -> None:
+    say("Targets (from the issue)")
+
+    def line(text, value, ok):
+        state = "n/a" if value is None else ("met" if ok else "NOT met")
+        say(f"    {text:<58} {value or '-':>22}  {state}")
+
+    by_n = {r["n"]: r for r in rows}
+    r = by_n.get(100)
+    v = r["emf"][1][0] / r["segs"] * 1e9 if r and 1 in r["emf"] else None
+    line("100×100, one core: ≤ 5 ns/segment", v and f"{v:.2f} ns/seg",
+         v is not None and v <= TARGETS["ns_100"])
+    w = r["warp"][0] / r["emf"][1][0] if r and r["warp"] and 1 in r["emf"] else None
+    line("100×100, one core: ≥ 4× faster than Warp's CPU device", w and f"{w:.2f}×",
+         w is not None and w >= TARGETS["warp_speedup"])
+    r = by_n.get(1000)
+    k = 2 if r and 2 in r["emf"] else None
+    v = r["emf"][k][0] / r["segs"] * 1e9 if k else None
+    line("1000×1000, two threads: ≤ 5 ns/segment", v and f"{v:.2f} ns/seg",
+         v is not None and v <= TARGETS["ns_1000"])
+    v = min(x["wall_time_s"] for x in fr["summaries"]) if fr else None
+    line(f"{SCENARIO} full run, paper's scheme: ≤ 5 s wall", v and f"{v:.2f} s",
+         v is not None and v <= TARGETS["run_wall"])
+    v = st["warm"]["first_step"] if st else None
+    line("warm cache: simulating within 3 s of launch", v and f"{v:.2f} s to 1st step",
+         v is not None and v <= TARGETS["start"])
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true",
+                   help="100×100 evaluation, warm start-up and memory only (about a minute)")
+    p.add_argument("--sizes", type=int, nargs="+", default=[100, 1000],
+                   help="sheet sizes n (n×n) of (a) and (d) (default: 100 1000)")
+    p.add_argument("--repeat", type=int, default=7, help="timing samples per figure")
+    p.add_argument("--runs", type=int, default=3, help="full paper-field runs in (b)")
+    p.add_argument("--no-full-run", action="store_true", help="skip (b)")
+    p.add_argument("--end-time", type=float, metavar="SECONDS",
+                   help="solver.end_time of the runs of (b) and --schemes (default: the "
+                        "scenario's)")
+    p.add_argument("--no-cold", action="store_true",
+                   help="skip the cold-cache start-up (it recompiles every kernel)")
+    p.add_argument("--no-warp", action="store_true", help="leave Warp out of (a)")
+    p.add_argument("--schemes", action="store_true",
+                   help="only compare the solver schemes on full paper-field runs (minutes)")
+    p.add_argument("--child", nargs="+", help=argparse.SUPPRESS)
+    a = p.parse_args(argv)
+
+    if a.child:
+        mode, *rest = a.child
+        out = child_startup() if mode == "startup" else child_memory(int(rest[0]))
+        print(json.dumps(out))
+        return
+
+    import numba
+
+    cpu0 = cpu_snapshot()
+    say("emfabric benchmark suite: python benchmarks/bench.py " + " ".join(sys.argv[1:]))
+    for line in machine():
+        say(f"  {line}")
+    say()
+    base = {} if a.end_time is None else {"solver.end_time": a.end_time}
+    if a.schemes:
+        bench_schemes(base)
+        say(f"Other processes used {other_cpu(cpu0):.2f} cores on average while this ran")
+        return
+    sizes = [s for s in a.sizes if not (a.quick and s > 100)]
+    max_threads = numba.config.NUMBA_NUM_THREADS
+    threads = [1] if max_threads == 1 else [1, max_threads]
+
+    warp_note = ""
+    use_warp = not a.no_warp
+    if use_warp:
+        try:
+            sys.path.insert(0, str(HERE))
+            import warp_kernels
+
+            warp_kernels.init()
+        except ImportError as err:
+            use_warp = False
+            warp_note = (f"Warp: not installed ({err}); `pip install warp-lang` "
+                         "(the `bench` extra) to compare")
+    else:
+        warp_note = "Warp: left out (--no-warp)"
+
+    section = cpu_snapshot()
+    bandwidth = {k: _triad_bandwidth(k, a.repeat) for k in threads}
+    rows = [bench_evaluation(n, threads, a.repeat, use_warp) for n in sizes]
+    numba.set_num_threads(max_threads)
+    print_evaluations(rows, threads, warp_note, bandwidth)
+    busy_note(section)
+    say()
+
+    fr = None
+    if not (a.quick or a.no_full_run):
+        section = cpu_snapshot()
+        fr = bench_full_run(a.runs, a.repeat, base)
+        print_full_run(fr)
+        busy_note(section)
+        say()
+
+    st = None
+    section = cpu_snapshot()
+    try:
+        st = bench_startup(cold=not (a.quick or a.no_cold))
+        print_startup(st)
+        busy_note(section)
+    except RuntimeError as err:
+        say(f"(c) start-up: not measured, {err}")
+    say()
+
+    try:
+        print_memory([child("memory", str(n)) for n in sizes])
+    except RuntimeError as err:
+        say(f"(d) memory: not measured, {err}")
+    say(f"    this benchmark process: peak RSS {peak_rss() / 2**20:.0f} MiB "
+        f"(getrusage: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**10:.0f} MiB)")
+    say()
+    targets(rows, fr if a.end_time is None else None, st)
+    say()
+    busy = other_cpu(cpu0)
+    say(f"Other processes used {busy:.2f} cores on average while this ran"
+        + ("" if busy < 0.1 else " (the figures above may be perturbed: rerun on an idle machine)"))
+
+
+if __name__ == "__main__":
+    main()
