@@ -108,8 +108,7 @@ class Model:
         return st
 
 
-# cumulative energy terms [J], indices into State.energy
-E_WORK_FIELD, E_WORK_GRAVITY, E_FRICTION, E_CONTACT, E_PROJECTION, E_DAMAGE = range(6)
+# cumulative energy terms [J], in the order of State.energy
 ENERGY_TERMS = (
     "work_field",
     "work_gravity",
@@ -172,15 +171,3 @@ class State:
             iterations=self.iterations, error=self.error, contact_count=self.contact_count,
             energy=self.energy.copy(),
         )
-
-    def assign(self, other: State) -> None:
-        """Copy every value of `other` into this state's buffers."""
-        self.node_x[...] = other.node_x
-        self.node_v[...] = other.node_v
-        self.node_f[...] = other.node_f
-        self.seg_alpha[...] = other.seg_alpha
-        self.body[...] = other.body
-        self.energy[...] = other.energy
-        for name in ("t", "dt", "steps", "rejected", "evaluations", "iterations", "error",
-                     "contact_count"):
-            setattr(self, name, getattr(other, name))

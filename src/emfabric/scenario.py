@@ -355,7 +355,3 @@ def apply_overrides(scenario: Scenario, overrides: dict[str, Any]) -> Scenario:
             node = sub
         node[parts[-1]] = value
     return scenario_from_dict(data, "overrides " + ", ".join(overrides))
-
-
-def dump_scenario(scenario: Scenario, path: str | Path) -> None:
-    Path(path).write_text(scenario.to_toml(), encoding="utf-8")
