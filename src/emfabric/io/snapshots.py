@@ -96,7 +96,7 @@ class Snapshots:
             cell_data={"damage": [self.alpha[k]]},
         )
         write_atomic(folder / f"fabric_{k:05d}.vtu", lambda tmp: meshio.write(
-            tmp, mesh, file_format="vtu", binary=True))
+            tmp, mesh, file_format="vtu", binary=True, compression=None))
         if self._sphere is not None:
             pts, tris = self._sphere
             b = self.body[k]
@@ -111,7 +111,7 @@ class Snapshots:
                 field_data={"nose": nose},
             )
             write_atomic(folder / f"projectile_{k:05d}.vtu", lambda tmp: meshio.write(
-                tmp, body_mesh, file_format="vtu", binary=True))
+                tmp, body_mesh, file_format="vtu", binary=True, compression=None))
 
     def _write_pvd(self, stem: str) -> None:
         lines = ['<?xml version="1.0"?>',
