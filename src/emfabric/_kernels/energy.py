@@ -25,7 +25,9 @@ def step_energy(x0, x1, v0, v1, f1, mass, inv_mass, charge, efield, bfield, regi
     """Add this step's field work, gravity work and dissipations to out (6,) [J]."""
     w_field = 0.0
     w_grav = 0.0
-    for n in range(x0.shape[1]):
+    # E = 0 and g = 0 (the paper's case): nothing works on the nodes, skip the node pass
+    active = np.any(efield != 0.0) or np.any(grav != 0.0)
+    for n in range(x0.shape[1] if active else 0):
         if inv_mass[n] == 0.0:
             continue
         q0 = charge[n] if in_field(x0[2, n], region, z0) else 0.0
