@@ -27,3 +27,26 @@ def fabric_only(**dotted) -> Scenario:
 @pytest.fixture
 def tmp_run_dir(tmp_path):
     return tmp_path / "run"
+
+
+def run_demo(out, overrides, progress=None):
+    """Run the demo-small scenario with overrides into `out` and return `out`."""
+    from emfabric.runner import run
+    from emfabric.scenario import load_scenario
+
+    run(load_scenario("demo-small", overrides), out, progress=progress)
+    return out
+
+
+def interrupted_demo(out, overrides, after: int):
+    """Run demo-small into `out` and press Ctrl-C after `after` steps; return `out`."""
+    steps = []
+
+    def stop(state, info) -> None:
+        steps.append(state.t)
+        if len(steps) >= after:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run_demo(out, overrides, progress=stop)
+    return out

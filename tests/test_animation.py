@@ -13,6 +13,8 @@ import pytest
 
 from emfabric import animation, plots
 
+from conftest import interrupted_demo, run_demo
+
 TINY = {
     "fabric.nodes": [13, 13],
     "solver.end_time": 20e-6,
@@ -22,13 +24,9 @@ TINY = {
 }
 
 
-def tiny_run(out: Path, progress=None) -> Path:
+def tiny_run(out: Path) -> Path:
     """Run the tiny scenario into ``out`` (the tests may use the simulator; animation may not)."""
-    from emfabric.runner import run
-    from emfabric.scenario import load_scenario
-
-    run(load_scenario("demo-small", TINY), out, progress=progress)
-    return out
+    return run_demo(out, TINY)
 
 
 @pytest.fixture(scope="session")
@@ -80,15 +78,7 @@ def test_movie_colour_range_is_the_run_damage_range(movie_run):
 
 def test_partial_run_is_animated(tmp_path, caplog):
     """An interrupted run is animated as far as it got, with a warning that it is partial."""
-    steps = []
-
-    def stop(state, info) -> None:
-        steps.append(state.t)
-        if len(steps) >= 12:
-            raise KeyboardInterrupt
-
-    with pytest.raises(KeyboardInterrupt):
-        tiny_run(tmp_path, progress=stop)
+    interrupted_demo(tmp_path, TINY, after=12)
     with caplog.at_level(logging.WARNING, logger="emfabric.animation"):
         (mp4,) = animation.animate(tmp_path, fps=4)
     assert any("partial" in r.getMessage() for r in caplog.records)

@@ -15,6 +15,8 @@ from mpl_toolkits.mplot3d import Axes3D
 
 from emfabric import plots
 
+from conftest import interrupted_demo, run_demo
+
 # 13 x 13 nodes (a centre node under the sphere), 20 µs, snapshots every 5 µs; a low critical
 # stretch so that the yarns take some damage within that time
 TINY = {
@@ -28,13 +30,9 @@ SIMULATOR = ("emfabric.runner", "emfabric.integrator", "emfabric._kernels", "emf
              "emfabric.model", "emfabric.diagnostics", "numba")
 
 
-def tiny_run(out: Path, progress=None, **overrides) -> Path:
+def tiny_run(out: Path, **overrides) -> Path:
     """Run the tiny scenario into ``out`` (the tests may use the simulator; plots may not)."""
-    from emfabric.runner import run
-    from emfabric.scenario import load_scenario
-
-    run(load_scenario("demo-small", {**TINY, **overrides}), out, progress=progress)
-    return out
+    return run_demo(out, {**TINY, **overrides})
 
 
 @pytest.fixture(scope="session")
@@ -49,17 +47,7 @@ def nofield_run(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def partial_run(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("partial")
-    steps = []
-
-    def stop_after_a_few(state, info) -> None:
-        steps.append(state.t)
-        if len(steps) >= 8:
-            raise KeyboardInterrupt
-
-    with pytest.raises(KeyboardInterrupt):
-        tiny_run(out, progress=stop_after_a_few)
-    return out
+    return interrupted_demo(tmp_path_factory.mktemp("partial"), TINY, after=8)
 
 
 def ylabels(fig) -> list[str]:
