@@ -90,25 +90,22 @@ def attempt_step(grid, fab, mat, fld, body, sin, sout, work, phi, dt, tol, kmax,
     anderson = d_f.shape[0] > 0
     err_rows = err_work[0]
 
+    # one pass over the start state: the fastest node (contact reach) and the size of the
+    # coordinates (a displacement below their round-off is no motion: ϖ would be noise/noise)
+    vmax = 0.0
+    still = 0.0
+    for n in range(x0.shape[1]):
+        vmax = max(vmax, v0[0, n] ** 2 + v0[1, n] ** 2 + v0[2, n] ** 2)
+        still += abs(x0[0, n]) + abs(x0[1, n]) + abs(x0[2, n])
+    still *= 1e-13
     ncand = 0
     if has_body:
         # contact candidates: nodes that can reach the body within this step
         speed = math.sqrt(np.sum(b_in[1] ** 2)) + radius * math.sqrt(np.sum(b_in[2] ** 2))
-        vmax = 0.0
-        for n in range(x0.shape[1]):
-            s2 = v0[0, n] ** 2 + v0[1, n] ** 2 + v0[2, n] ** 2
-            if s2 > vmax:
-                vmax = s2
         reach = 1.05 * radius + 2.0 * dt * (speed + math.sqrt(vmax))
         ncand = find_candidates(x0, inv_mass, b_in[0], reach, cand, flag)
     else:
         flag[:] = 0
-
-    # displacement below round-off of the coordinates is no motion (ϖ would be noise/noise)
-    still = 0.0
-    for n in range(x0.shape[1]):
-        still += abs(x0[0, n]) + abs(x0[1, n]) + abs(x0[2, n])
-    still *= 1e-13
 
     imp_force = np.zeros(3)
     imp_moment = np.zeros(3)
