@@ -160,11 +160,11 @@ def stretch(model, x: np.ndarray) -> np.ndarray:
 def iterate_args(integ, s, s2, dt: float) -> tuple:
     """fabric_iterate's arguments for one iterate from state s into s2, in the integrator's own
     workspace (its layout is the kernel's business): the first iterate of a step at dt."""
-    xbuf, t_work, err_work, _cand, flag, *_ = integ.work
+    xbuf, err_work, _cand, flag, *_ = integ.work
     xbuf[:] = s.node_x
     return (integ.grid, integ.fab, integ.mat, integ.fld, xbuf, s.node_x, s.node_v, s.node_f,
-            s.seg_alpha, flag, s2.node_x, s2.node_v, s2.node_f, s2.seg_alpha, t_work, err_work,
-            integ.phi, dt)
+            s.seg_alpha, flag, s2.node_x, s2.node_v, s2.node_f, s2.seg_alpha, integ.rowbuf,
+            integ.threads, err_work, integ.phi, dt)
 
 
 @functools.cache
@@ -176,10 +176,10 @@ def _compiled_repeat():
 
     @njit
     def repeat(count, grid, fab, mat, fld, prev, x0, v0, f0, alpha_c, skip_err, cur, v1, f1,
-               alpha_t, t_work, err_work, phi, dt):
+               alpha_t, rowbuf, threads, err_work, phi, dt):
         for _ in range(count):
             fabric_iterate(grid, fab, mat, fld, prev, x0, v0, f0, alpha_c, skip_err, cur, v1,
-                           f1, alpha_t, t_work, err_work, phi, dt)
+                           f1, alpha_t, rowbuf, threads, err_work, phi, dt)
 
     return repeat
 
@@ -325,7 +325,7 @@ def _step_loop(sc, steps: int, samples: list | None):
     integ = Integrator(model)
     s_in = model.state()
     s_out = s_in.copy()
-    flag = integ.work[4]
+    flag = integ.work[3]
     while s_in.steps < steps:
         integ.step(s_in, s_out, dt_limit=t_end - s_in.t)
         s_in, s_out = s_out, s_in
@@ -351,7 +351,7 @@ def bench_full_run(runs: int, repeats: int, base: dict) -> dict:
     # one evaluation timed on the states sampled along the run (contact candidates as that
     # step left them): the run's own mix of slack, stretched and damaging yarns
     per_eval, tension, past = [], [], []
-    flag = integ.work[4]
+    flag = integ.work[3]
     for st, fl in samples:
         flag[:] = fl
         args = iterate_args(integ, st, st.copy(), st.dt)

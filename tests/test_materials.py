@@ -25,7 +25,7 @@ def _node_forces(x, nx, ny, coef, rest_w, rest_f, alpha, kind=0, fung_h=0.0, u_c
     f1, a_out = np.empty((3, n)), np.empty(s)
     fabric_iterate((nx, ny), fab, (kind, fung_h, u_crit, rate), fld, x, x, np.zeros((3, n)),
                    np.zeros((3, n)), alpha, np.ones(n, np.uint8), np.empty((3, n)),
-                   np.empty((3, n)), f1, a_out, np.empty((1, ROWBUF_ROWS, nx + 1)),
+                   np.empty((3, n)), f1, a_out, np.empty((ROWBUF_ROWS, nx + 1)), None,
                    (np.empty((2, ny)), np.empty(n), np.empty(n)), 1.0, 0.0)
     return f1, a_out
 

@@ -7,21 +7,27 @@ and on failure shrinks Δt by the controller (3.9) and restarts from t (s_in is 
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 
 import numba
 import numpy as np
 
+from emfabric._kernels import is_compiled, mark_compiled
 from emfabric._kernels.body import field_wrench
 from emfabric._kernels.energy import step_energy
-from emfabric._kernels.nodes import ROWBUF_ROWS, ROWS_PER_BLOCK
+from emfabric._kernels.nodes import (
+    ROWBUF_ROWS,
+    ROWS_PER_BLOCK,
+    fused_iterate,
+    fused_iterate_threads,
+)
 from emfabric._kernels.step import (
     CONTACT_MISSED,
     CONVERGED,
     NOT_CONVERGED,
     NOT_FINITE,
     attempt_step,
-    fabric_iterate,
 )
 from emfabric.model import BODY_F, BODY_M, BODY_R0, BODY_V, BODY_W, BODY_X, Model, State
 
@@ -85,12 +91,12 @@ class Integrator:
         self.body = (m.has_body, m.body_radius, m.body_mass, m.body_inertia, m.body_charge_pos,
                      m.body_charge, sc.contact.static_friction, sc.contact.dynamic_friction)
         # threads pay off on large sheets only; block size fixed, so results never depend on them
-        threaded = threads if threads is not None else (
-            n >= THREADS_FROM_NODES and numba.config.NUMBA_NUM_THREADS > 1)
-        blocks = -(-m.ny // ROWS_PER_BLOCK) if threaded else 1
+        self._use_threads(threads if threads is not None else (
+            n >= THREADS_FROM_NODES and numba.config.NUMBA_NUM_THREADS > 1))
+        self._background: threading.Thread | None = None
+        self._background_ok = False
         self.work = (
             np.empty((3, n)),  # second iterate buffer
-            np.empty((blocks, ROWBUF_ROWS, m.nx + 1)),  # row buffers, per row block
             (np.empty((2, m.ny)), np.empty(n), np.empty(n)),  # error sums: per row, per node
             np.empty(n, dtype=np.int64),  # contact candidates
             np.zeros(n, dtype=np.uint8),  # candidate flags
@@ -101,10 +107,12 @@ class Integrator:
             np.empty(n),  # summation buffer
         )
         solver = sc.solver
-        depth = solver.anderson_depth if solver.scheme == "anderson" else 0
-        shape = (3, n) if depth else (3, 0)
-        self.accel = (np.empty(shape), np.empty((depth, *shape)), np.empty((depth, *shape)),
-                      np.empty(shape), np.empty(shape), np.zeros((depth, depth)))
+        # None for the plain fixed point: the step kernel is then compiled without Anderson
+        self.accel = None
+        if solver.scheme == "anderson":
+            depth = solver.anderson_depth
+            self.accel = (np.empty((3, n)), np.empty((depth, 3, n)), np.empty((depth, 3, n)),
+                          np.empty((3, n)), np.empty((3, n)), np.zeros((depth, depth)))
         self.phi = solver.phi
         self.tol = solver.tolerance
         self.k_target = solver.target_iterations if solver.adaptive else solver.max_iterations
@@ -114,18 +122,94 @@ class Integrator:
         self.dt_max = solver.dt_max
         self.dt_min = solver.dt_min
 
+    def _use_threads(self, on: bool) -> None:
+        """Pick the serial or the threaded node kernel (the same numbers, bit for bit).
+
+        The row buffers are one block for the serial kernel or one per row block for the
+        threaded one; the other is None, so that only the kernel in use is compiled."""
+        m = self.model
+        self.threaded = on
+        self.rowbuf = None if on else np.empty((ROWBUF_ROWS, m.nx + 1))
+        self.threads = (np.empty((-(-m.ny // ROWS_PER_BLOCK), ROWBUF_ROWS, m.nx + 1))
+                        if on else None)
+
+    def variant(self, threaded: bool | None = None) -> str:
+        """Name of the compiled step kernel this integrator runs (or would run threaded)."""
+        threaded = self.threaded if threaded is None else threaded
+        return (f"{'threads' if threaded else 'serial'}-"
+                f"{'anderson' if self.accel is not None else 'fixed-point'}")
+
+    def defer_threads(self) -> bool:
+        """Run serially until the threaded kernel is compiled, if it is not cached yet.
+
+        Returns whether it deferred; start_background_compile() then compiles the threaded
+        kernel beside the run, and step() switches to it once it is ready. Serial and threaded
+        kernels give identical results, so the switch does not change the run."""
+        if not self.threaded or is_compiled(self.variant(True)):
+            return False
+        self._use_threads(False)
+        self._background_ok = False
+        return True
+
+    def start_background_compile(self, s_in: State, s_out: State) -> None:
+        """Compile the threaded step kernel in a background thread (after defer_threads)."""
+        if self.threaded or self._background is not None or not self.defer_pending:
+            return
+        m = self.model
+        args = self._args(s_in, s_out, 0.0, None,
+                          np.empty((-(-m.ny // ROWS_PER_BLOCK), ROWBUF_ROWS, m.nx + 1)))
+        sig = tuple(numba.typeof(a) for a in args)
+
+        def compile_threaded() -> None:
+            try:
+                attempt_step.compile(sig)
+                self._background_ok = True
+            except Exception:  # noqa: BLE001 - the serial kernel simply stays in use
+                self._background_ok = False
+
+        self._background = threading.Thread(target=compile_threaded, name="emfabric-compile",
+                                            daemon=True)
+        self._background.start()
+
+    @property
+    def defer_pending(self) -> bool:
+        """Deferred to the serial kernel and not switched back yet."""
+        return (not self.threaded and self.model.node_count >= THREADS_FROM_NODES
+                and numba.config.NUMBA_NUM_THREADS > 1 and not self._background_ok)
+
+    @property
+    def compiling_in_background(self) -> bool:
+        return self._background is not None and self._background.is_alive()
+
+    def finish_background_compile(self) -> None:
+        """Wait for a background compile still running (a daemon thread: a process that exits
+        without waiting abandons it, and the next run compiles again)."""
+        if self._background is not None:
+            self._background.join()
+            if self._background_ok:
+                mark_compiled(self.variant(True))
+
+    def _args(self, s_in: State, s_out: State, dt: float, rowbuf, threads) -> tuple:
+        sin = (s_in.node_x, s_in.node_v, s_in.node_f, s_in.seg_alpha, s_in.body)
+        sout = (s_out.node_x, s_out.node_v, s_out.node_f, s_out.seg_alpha, s_out.body)
+        return (self.grid, self.fab, self.mat, self.fld, self.body, sin, sout, self.work, rowbuf,
+                threads, self.phi, dt, self.tol, self.k_target, self.accel)
+
     def step(self, s_in: State, s_out: State, *, dt_limit: float = math.inf) -> StepInfo:
         """Advance s_in by one accepted step into s_out; s_in is left untouched."""
         m = self.model
+        bg = self._background
+        if bg is not None and not bg.is_alive():
+            self._background = None
+            if self._background_ok:
+                mark_compiled(self.variant(True))
+                self._use_threads(True)
         dt = min(s_in.dt, dt_limit)
         rejected = 0
         evaluations = 0
-        sin = (s_in.node_x, s_in.node_v, s_in.node_f, s_in.seg_alpha, s_in.body)
-        sout = (s_out.node_x, s_out.node_v, s_out.node_f, s_out.seg_alpha, s_out.body)
         while True:
-            status, k, err, nc = attempt_step(self.grid, self.fab, self.mat, self.fld, self.body,
-                                              sin, sout, self.work, self.phi, dt, self.tol,
-                                              self.k_target, self.accel)
+            args = self._args(s_in, s_out, dt, self.rowbuf, self.threads)
+            status, k, err, nc = attempt_step(*args)
             evaluations += k
             if status == CONVERGED:
                 break
@@ -154,7 +238,7 @@ class Integrator:
         else:
             s_out.dt = s_in.dt
         s_out.energy[:] = s_in.energy
-        xbuf, _t, _e, _c, _f, c_node, c_imp, c_arm, c_proj, _b = self.work
+        xbuf, _e, _c, _f, c_node, c_imp, c_arm, c_proj, _b = self.work
         step_energy(s_in.node_x, s_out.node_x, s_in.node_v, s_out.node_v, s_out.node_f,
                     m.node_mass, m.node_inv_mass, m.node_charge, m.field_E, m.field_B,
                     m.field_region, m.field_z0, m.gravity, self.phi, dt, nc, c_node, c_imp, c_arm,
@@ -185,21 +269,30 @@ class Integrator:
 
 def initial_forces(model: Model, state: State) -> None:
     """ψ(t) of the start state: yarn + Lorentz + gravity on the nodes, field and gravity on the
-    body (the first step's explicit part)."""
+    body (the first step's explicit part).
+
+    Calls the node kernel the step kernel uses (compiled with it, so nothing more to compile)
+    with Δt = 0 and φ = 1: the update returns v1 = v0 and ψ(x0, v0) in node_f."""
     integ = Integrator(model)
+    integ.defer_threads()
     scratch = state.copy()
-    _x, rows, err, _c, _f, *_ = integ.work
-    # Δt = 0, φ = 1: the update returns v1 = v0 and ψ(x0, v0) in node_f
-    fabric_iterate(integ.grid, integ.fab, integ.mat, integ.fld, state.node_x, state.node_x,
-                   state.node_v, np.zeros_like(state.node_f), state.seg_alpha,
-                   np.ones(model.node_count, dtype=np.uint8), scratch.node_x, scratch.node_v,
-                   state.node_f, scratch.seg_alpha, rows, err, 1.0, 0.0)
-    if model.has_body:
-        m = model
+    m = model
+    mass, inv_mass, charge, coef, inv_l02 = integ.fab
+    kind, fung_h, u_crit, rate = integ.mat
+    efield, bfield, region, z0, grav = integ.fld
+    err_rows, err_num, err_den = integ.work[1]
+    kernel, rows = ((fused_iterate_threads, integ.threads) if integ.threaded
+                    else (fused_iterate, integ.rowbuf))
+    kernel(state.node_x, state.node_x, state.node_v, np.zeros_like(state.node_f),
+           state.seg_alpha, scratch.seg_alpha, m.nx, m.ny, coef, inv_l02, kind, fung_h, u_crit,
+           rate, mass, inv_mass, charge, 1.0, 0.0, efield, bfield, region, z0, grav,
+           np.ones(m.node_count, dtype=np.uint8), scratch.node_x, scratch.node_v, state.node_f,
+           err_rows, err_num, err_den, rows)
+    if m.has_body:
         b = state.body
         field_wrench(b[BODY_X], b[BODY_V], b[BODY_W], b[BODY_R0:BODY_R0 + 3], m.body_charge_pos,
-                     m.body_charge, m.field_E, m.field_B, m.field_region, m.field_z0,
-                     m.body_mass, m.gravity, b[BODY_F], b[BODY_M])
+                     m.body_charge, efield, bfield, region, z0, m.body_mass, grav, b[BODY_F],
+                     b[BODY_M])
 
 
 __all__ = ["DivergenceError", "Integrator", "StepInfo", "initial_forces", "step_factor"]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 from collections.abc import Callable
@@ -11,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from emfabric._kernels import CACHE_DIR, CACHE_PERSISTENT, is_compiled, mark_compiled
 from emfabric._kernels import diagnostics as _k
 from emfabric.builder import build_model
 from emfabric.diagnostics import flight_direction
@@ -21,6 +23,7 @@ from emfabric.model import Model, State
 from emfabric.scenario import Scenario
 
 ProgressFn = Callable[[State, StepInfo], None]
+log = logging.getLogger(__name__)
 
 
 @dataclass
@@ -70,6 +73,12 @@ def run(
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
     integ = Integrator(model)
+    # on a cold kernel cache, run serially and compile the threaded kernel beside the run
+    deferred = integ.defer_threads()
+    if not is_compiled(integ.variant()):
+        log.info("compiling kernels (first run only, about 20 s; cached in %s)" if
+                 CACHE_PERSISTENT else "compiling kernels (no writable cache folder: "
+                 "every run compiles; cached in %s for this process)", CACHE_DIR)
     s_in = model.state()
     s_out = s_in.copy()
     recorder = Recorder(model, integ.coef)
@@ -99,6 +108,10 @@ def run(
             info = integ.step(s_in, s_out, dt_limit=t_end - s_in.t)
             s_in, s_out = s_out, s_in
             recorder.record(s_in, info.dt, info.iterations, info.error)
+            if s_in.steps == 1:
+                mark_compiled(integ.variant())
+                if deferred:
+                    integ.start_background_compile(s_in, s_out)
             if s_in.t >= next_snap * (1 - 1e-12):
                 snaps.take(s_in)
                 next_snap = interval * (math.floor(s_in.t / interval + 1e-9) + 1)
@@ -120,6 +133,9 @@ def run(
     if snaps.times[-1] != s_in.t:
         snaps.take(s_in)
     result = finish(status, reason)
+    if integ.compiling_in_background and status != "partial":
+        log.info("finishing the threaded kernel's compile for later runs (first run only)")
+        integ.finish_background_compile()
     if error is not None:
         error.result = result  # type: ignore[attr-defined]
         raise error

@@ -8,6 +8,8 @@ the fixed point, and so the discrete φ-scheme, unchanged; only the iterates dif
 import numpy as np
 from numba import njit
 
+from emfabric._kernels.vec3 import copy_into, solve_in_place
+
 
 @njit(cache=True)
 def _dot(a, b):
@@ -40,11 +42,11 @@ def anderson_mix(k, x, g, d_f, d_g, f_prev, g_prev, gram):
         for i in range(min(k - 1, depth)):
             gram[col, i] = _dot(d_f[col], d_f[i])
             gram[i, col] = gram[col, i]
-    f_prev[:] = x
-    g_prev[:] = g
+    copy_into(f_prev, x)
+    copy_into(g_prev, g)
     m = min(k - 1, depth)
     if m == 0:
-        x[:] = g
+        copy_into(x, g)
         return
     rhs = np.empty(m)
     for i in range(m):
@@ -56,7 +58,8 @@ def anderson_mix(k, x, g, d_f, d_g, f_prev, g_prev, gram):
         scale = max(scale, a[i, i])
     for i in range(m):
         a[i, i] += 1e-12 * scale + 1e-300
-    gamma = np.linalg.solve(a, rhs)
+    solve_in_place(a, rhs, m)
+    gamma = rhs
     for c in range(3):
         for n in range(x.shape[1]):
             v = g[c, n]

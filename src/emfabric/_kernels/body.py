@@ -1,27 +1,22 @@
 """Rigid body update inside the fixed-point loop: translation (4.12–4.13), rotation (B1–B18)."""
 
-import math
 
 import numpy as np
 from numba import njit
 
 from emfabric._kernels.nodes import in_field
+from emfabric._kernels.vec3 import (
+    cross,
+    mat_mul,
+    mat_vec,
+    norm,
+    rotation_increment,
+    vec,
+    world_inertia_solve,
+    world_inertia_times,
+)
 
 X, V, W, F, M, R0 = 0, 1, 2, 3, 4, 5
-
-
-@njit(cache=True)
-def rotation_increment(theta):
-    """Rotation matrix by the vector angle theta (Rodrigues; equals Aᵀ·R(Δθ)·A of B13–B14)."""
-    angle = math.sqrt(theta[0] ** 2 + theta[1] ** 2 + theta[2] ** 2)
-    out = np.eye(3)
-    if angle == 0.0:
-        return out
-    kx, ky, kz = theta[0] / angle, theta[1] / angle, theta[2] / angle
-    s = math.sin(angle)
-    c1 = 1.0 - math.cos(angle)
-    k = np.array([[0.0, -kz, ky], [kz, 0.0, -kx], [-ky, kx, 0.0]])
-    return out + s * k + c1 * (k @ k)
 
 
 @njit(cache=True)
@@ -31,16 +26,23 @@ def field_wrench(centre, vel, omega, rot, charge_pos, charge_q, efield, bfield, 
     for c in range(3):
         force[c] = mass * grav[c]
         moment[c] = 0.0
+    w = vec(omega)
+    e = vec(efield)
+    b = vec(bfield)
     for k in range(charge_q.shape[0]):
-        r = rot @ charge_pos[k]
+        r = mat_vec(rot, charge_pos[k])
         if not in_field(centre[2] + r[2], region, z0):
             continue
         q = charge_q[k]
         # velocity of the charged point, eq. 6.1
-        vp = vel + np.cross(omega, r)
-        psi = q * (efield + np.cross(vp, bfield))
-        force += psi
-        moment += np.cross(r, psi)
+        wr = cross(w, r)
+        vp = (vel[0] + wr[0], vel[1] + wr[1], vel[2] + wr[2])
+        vb = cross(vp, b)
+        psi = (q * (e[0] + vb[0]), q * (e[1] + vb[1]), q * (e[2] + vb[2]))
+        rp = cross(r, psi)
+        for c in range(3):
+            force[c] += psi[c]
+            moment[c] += rp[c]
 
 
 @njit(cache=True)
@@ -54,41 +56,55 @@ def body_update(b_in, b_out, inertia_body, mass, charge_pos, charge_q, efield, b
     v0 = b_in[V]
     w0 = b_in[W]
     rot0 = b_in[R0:R0 + 3]
-    xk = b_out[X].copy()
-    vk = b_out[V].copy()
-    wk = b_out[W].copy()
-    rotk = b_out[R0:R0 + 3].copy()
+    xk = vec(b_out[X])
+    wk = vec(b_out[W])
     f1 = np.empty(3)
     m1 = np.empty(3)
-    field_wrench(xk, vk, wk, rotk, charge_pos, charge_q, efield, bfield, region, z0, mass, grav,
-                 f1, m1)
+    field_wrench(b_out[X], b_out[V], b_out[W], b_out[R0:R0 + 3], charge_pos, charge_q, efield,
+                 bfield, region, z0, mass, grav, f1, m1)
     # translation, eqs. 4.12–4.13, with the contact impulses taken whole
-    v1 = v0 + dt / mass * (phi * f1 + (1.0 - phi) * b_in[F]) + imp_force / mass
-    x1 = x0 + dt * (phi * v1 + (1.0 - phi) * v0)
+    v1 = np.empty(3)
+    x1 = np.empty(3)
+    for c in range(3):
+        v1[c] = v0[c] + dt / mass * (phi * f1[c] + (1.0 - phi) * b_in[F, c]) + imp_force[c] / mass
+        x1[c] = x0[c] + dt * (phi * v1[c] + (1.0 - phi) * v0[c])
     # rotation, eqs. B3–B6 in the inertial frame: H1 = I0·ω0 + Δt·M(t+φΔt) + contact moments
-    inertia0 = rot0 @ inertia_body @ rot0.T
-    h1 = inertia0 @ w0 + dt * (phi * m1 + (1.0 - phi) * b_in[M]) + imp_moment
-    w = wk.copy()
-    rot1 = rot0.copy()
+    h0 = world_inertia_times(rot0, inertia_body, w0)
+    h1 = (h0[0] + dt * (phi * m1[0] + (1.0 - phi) * b_in[M, 0]) + imp_moment[0],
+          h0[1] + dt * (phi * m1[1] + (1.0 - phi) * b_in[M, 1]) + imp_moment[1],
+          h0[2] + dt * (phi * m1[2] + (1.0 - phi) * b_in[M, 2]) + imp_moment[2])
+    w = wk
+    inc = np.empty((3, 3))
+    rot1 = np.empty((3, 3))
+    theta = np.empty(3)
     for _ in range(100):
         # axis at t + φΔt, eq. B8; inertia rotated with the body, eq. B15
-        rot1 = rotation_increment(dt * (phi * w + (1.0 - phi) * w0)) @ rot0
-        inertia1 = rot1 @ inertia_body @ rot1.T
-        w_new = np.linalg.solve(inertia1, h1)
-        change = math.sqrt(np.sum((w_new - w) ** 2))
+        for c in range(3):
+            theta[c] = dt * (phi * w[c] + (1.0 - phi) * w0[c])
+        rotation_increment(theta, inc)
+        mat_mul(inc, rot0, rot1)
+        w_new = world_inertia_solve(rot1, inertia_body, h1)
+        change = norm((w_new[0] - w[0], w_new[1] - w[1], w_new[2] - w[2]))
         w = w_new
         # eq. B16
-        if change <= tol * math.sqrt(np.sum(w * w)):
+        if change <= tol * norm(w):
             break
-    rot1 = rotation_increment(dt * (phi * w + (1.0 - phi) * w0)) @ rot0
-    b_out[X] = x1
-    b_out[V] = v1
-    b_out[W] = w
-    b_out[F] = f1
-    b_out[M] = m1
-    b_out[R0:R0 + 3] = rot1
+    for c in range(3):
+        theta[c] = dt * (phi * w[c] + (1.0 - phi) * w0[c])
+    rotation_increment(theta, inc)
+    mat_mul(inc, rot0, rot1)
+    for c in range(3):
+        b_out[X, c] = x1[c]
+        b_out[V, c] = v1[c]
+        b_out[W, c] = w[c]
+        b_out[F, c] = f1[c]
+        b_out[M, c] = m1[c]
+        for d in range(3):
+            b_out[R0 + c, d] = rot1[c, d]
     # error measure in displacement units: the centre plus a surface point at distance `arm`
-    num = math.sqrt(np.sum((x1 - xk) ** 2)) + arm * dt * phi * math.sqrt(np.sum((w - wk) ** 2))
-    wm = phi * w + (1.0 - phi) * w0
-    den = math.sqrt(np.sum((x1 - x0) ** 2)) + arm * dt * math.sqrt(np.sum(wm * wm))
+    num = (norm((x1[0] - xk[0], x1[1] - xk[1], x1[2] - xk[2]))
+           + arm * dt * phi * norm((w[0] - wk[0], w[1] - wk[1], w[2] - wk[2])))
+    wm = (phi * w[0] + (1.0 - phi) * w0[0], phi * w[1] + (1.0 - phi) * w0[1],
+          phi * w[2] + (1.0 - phi) * w0[2])
+    den = norm((x1[0] - x0[0], x1[1] - x0[1], x1[2] - x0[2])) + arm * dt * norm(wm)
     return num, den

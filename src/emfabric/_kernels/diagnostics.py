@@ -5,6 +5,7 @@ import math
 import numpy as np
 from numba import njit
 
+from emfabric._kernels.vec3 import cross, dot, mat_vec, tilt_angle, vec, world_inertia_times
 from emfabric._kernels.yarn import strain_energy_density
 
 # indices of the scalar results
@@ -105,19 +106,19 @@ def history_row(t, dt, iterations, error, rejected, evaluations, contacts, body,
     Returns the record's total energy (kinetic + strain + dissipated − work) [J].
     """
     rot = body[5:8]
-    x = body[0]
-    v = body[1]
-    w = body[2]
-    nose = rot @ nose_body
-    inertia = rot @ inertia_body @ rot.T
-    h = inertia @ w
-    p = b_mass * v if has_body else np.zeros(3)
-    ke_r = 0.5 * np.sum(w * h) if has_body else 0.0
-    ke_t = 0.5 * b_mass * np.sum(v * v) if has_body else 0.0
-    ang = np.cross(x, p) + h if has_body else np.zeros(3)
+    x = vec(body[0])
+    v = vec(body[1])
+    w = vec(body[2])
+    nose = mat_vec(rot, nose_body)
+    zero = (0.0, 0.0, 0.0)
+    h = world_inertia_times(rot, inertia_body, w) if has_body else zero
+    p = (b_mass * v[0], b_mass * v[1], b_mass * v[2]) if has_body else zero
+    ke_r = 0.5 * dot(w, h) if has_body else 0.0
+    ke_t = 0.5 * b_mass * dot(v, v) if has_body else 0.0
+    xp = cross(x, p)
+    ang = (xp[0] + h[0], xp[1] + h[1], xp[2] + h[2])
     # tilt, eq. 5.2, in atan2 form (accurate at small angles)
-    cr = np.cross(nose, nose_body)
-    tilt = math.atan2(math.sqrt(np.sum(cr * cr)), np.sum(nose * nose_body)) if has_body else 0.0
+    tilt = tilt_angle(rot, nose_body) if has_body else 0.0
     total = (ke_t + ke_r + diag[KE] + diag[STRAIN] + energy[2] + energy[3] + energy[4]
              + energy[5] - energy[0] - energy[1])
     e0 = total if math.isnan(e_initial) else e_initial
@@ -127,20 +128,22 @@ def history_row(t, dt, iterations, error, rejected, evaluations, contacts, body,
     row[3] = error
     row[4] = rejected
     row[5] = evaluations
-    row[6:9] = x
-    row[9:12] = v
-    row[12:15] = w
-    row[15:18] = nose
+    for c in range(3):
+        row[6 + c] = x[c]
+        row[9 + c] = v[c]
+        row[12 + c] = w[c]
+        row[15 + c] = nose[c]
     k = 18
     row[k] = tilt
     row[k + 1] = contacts
     row[k + 2] = diag[DEFLECTION]
     row[k + 3] = diag[STRETCH]
     k += 4
-    row[k:k + 3] = diag[PX:PZ + 1]
-    row[k + 3:k + 6] = diag[LX:LZ + 1]
-    row[k + 6:k + 9] = p
-    row[k + 9:k + 12] = ang
+    for c in range(3):
+        row[k + c] = diag[PX + c]
+        row[k + 3 + c] = diag[LX + c]
+        row[k + 6 + c] = p[c]
+        row[k + 9 + c] = ang[c]
     k += 12
     row[k] = ke_t + ke_r
     row[k + 1] = ke_r
@@ -149,6 +152,7 @@ def history_row(t, dt, iterations, error, rejected, evaluations, contacts, body,
     row[k + 4] = diag[BROKEN]
     row[k + 5] = diag[MIN_ALPHA]
     k += 6
-    row[k:k + 6] = energy
+    for c in range(6):
+        row[k + c] = energy[c]
     row[k + 6] = total - e0
     return e0

@@ -9,12 +9,11 @@ the non-impulsive, non-magnetic forces do over δ is not seen by the velocity up
 as projection dissipation. Damage releases α-drop × stored energy.
 """
 
-import math
 
-import numpy as np
 from numba import njit
 
 from emfabric._kernels.nodes import in_field
+from emfabric._kernels.vec3 import cross, dot, mat_vec, norm, vec
 from emfabric._kernels.yarn import strain_energy_density
 
 
@@ -26,7 +25,9 @@ def step_energy(x0, x1, v0, v1, f1, mass, inv_mass, charge, efield, bfield, regi
     w_field = 0.0
     w_grav = 0.0
     # E = 0 and g = 0 (the paper's case): nothing works on the nodes, skip the node pass
-    active = np.any(efield != 0.0) or np.any(grav != 0.0)
+    active = False
+    for c in range(3):
+        active = active or efield[c] != 0.0 or grav[c] != 0.0
     for n in range(x0.shape[1] if active else 0):
         if inv_mass[n] == 0.0:
             continue
@@ -41,35 +42,44 @@ def step_energy(x0, x1, v0, v1, f1, mass, inv_mass, charge, efield, bfield, regi
     # the body: charged points and gravity
     rot0 = b_in[5:8]
     rot1 = b_out[5:8]
+    e = vec(efield)
     for k in range(q_val.shape[0]):
-        p0 = b_in[0] + rot0 @ q_pos[k]
-        p1 = b_out[0] + rot1 @ q_pos[k]
-        q0 = q_val[k] if in_field(p0[2], region, z0) else 0.0
-        q1 = q_val[k] if in_field(p1[2], region, z0) else 0.0
-        w_field += (phi * q1 + (1.0 - phi) * q0) * np.sum(efield * (p1 - p0))
-    w_grav += b_mass * np.sum(grav * (b_out[0] - b_in[0]))
+        r0 = mat_vec(rot0, q_pos[k])
+        r1 = mat_vec(rot1, q_pos[k])
+        d = ((b_out[0, 0] + r1[0]) - (b_in[0, 0] + r0[0]),
+             (b_out[0, 1] + r1[1]) - (b_in[0, 1] + r0[1]),
+             (b_out[0, 2] + r1[2]) - (b_in[0, 2] + r0[2]))
+        q0 = q_val[k] if in_field(b_in[0, 2] + r0[2], region, z0) else 0.0
+        q1 = q_val[k] if in_field(b_out[0, 2] + r1[2], region, z0) else 0.0
+        w_field += (phi * q1 + (1.0 - phi) * q0) * dot(e, d)
+    for c in range(3):
+        w_grav += b_mass * grav[c] * (b_out[0, c] - b_in[0, c])
 
     d_fric = 0.0
     d_cont = 0.0
     d_proj = 0.0
-    vbar = 0.5 * (b_in[1] + b_out[1])
-    wbar = 0.5 * (b_in[2] + b_out[2])
+    b = vec(bfield)
     for k in range(nc):
         n = c_node[k]
-        r = c_arm[:, k]
-        rr = math.sqrt(np.sum(r * r))
-        nh = r / rr
-        jv = c_imp[:, k]
-        point = vbar + np.cross(wbar, r)
-        rel = point - 0.5 * (v0[:, n] + v1[:, n])
-        jn = np.sum(jv * nh)
-        d_cont += jn * np.sum(nh * rel)
-        d_fric += np.sum((jv - jn * nh) * rel)
+        r = vec(c_arm[:, k])
+        rr = norm(r)
+        nh = (r[0] / rr, r[1] / rr, r[2] / rr)
+        jv = vec(c_imp[:, k])
+        wr = cross((0.5 * (b_in[2, 0] + b_out[2, 0]), 0.5 * (b_in[2, 1] + b_out[2, 1]),
+                    0.5 * (b_in[2, 2] + b_out[2, 2])), r)
+        rel = (0.5 * (b_in[1, 0] + b_out[1, 0]) + wr[0] - 0.5 * (v0[0, n] + v1[0, n]),
+               0.5 * (b_in[1, 1] + b_out[1, 1]) + wr[1] - 0.5 * (v0[1, n] + v1[1, n]),
+               0.5 * (b_in[1, 2] + b_out[1, 2]) + wr[2] - 0.5 * (v0[2, n] + v1[2, n]))
+        jn = dot(jv, nh)
+        d_cont += jn * dot(nh, rel)
+        d_fric += dot((jv[0] - jn * nh[0], jv[1] - jn * nh[1], jv[2] - jn * nh[2]), rel)
         # forces of the φ-update over the unseen displacement δ (magnetic part does no work)
         q1 = charge[n] if in_field(x1[2, n], region, z0) else 0.0
-        vpred = v1[:, n] - jv / mass[n]
-        fnm = f1[:, n] - q1 * np.cross(vpred, bfield)
-        d_proj += np.sum(fnm * (c_proj[:, k] - phi * dt * jv / mass[n]))
+        m = mass[n]
+        vb = cross((v1[0, n] - jv[0] / m, v1[1, n] - jv[1] / m, v1[2, n] - jv[2] / m), b)
+        for c in range(3):
+            fnm = f1[c, n] - q1 * vb[c]
+            d_proj += fnm * (c_proj[c, k] - phi * dt * jv[c] / m)
 
     d_dam = 0.0
     for s in range(alpha_old.shape[0]):

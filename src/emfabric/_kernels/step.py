@@ -16,6 +16,7 @@ from emfabric._kernels.body import body_update
 from emfabric._kernels.contact import find_candidates, sphere_contact
 from emfabric._kernels.nodes import fused_iterate, fused_iterate_threads
 from emfabric._kernels.sums import fsum
+from emfabric._kernels.vec3 import copy_into, norm
 
 CONVERGED, NOT_CONVERGED, NOT_FINITE, CONTACT_MISSED = 0, 1, 2, 3
 
@@ -48,31 +49,40 @@ def _nodes_inside(x, inv_mass, flag, centre, radius):
     return count
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def fabric_iterate(grid, fab, mat, fld, prev, x0, v0, f0, alpha_c, skip_err, cur, v1, f1,
-                   alpha_t, t_seg, err, phi, dt):
+                   alpha_t, rowbuf, threads, err, phi, dt):
     """One force evaluation + node update: yarn tensions and damage at the iterate `prev`, then
-    the φ-update of every node into (cur, v1, f1). t_seg: row buffers, shape
-    (blocks, ROWBUF_ROWS, nx + 1); more than one block runs the threaded kernel. err = (per-row
-    sums (2, ny), per-node scratch (node_count,), per-node scratch (node_count,))."""
+    the φ-update of every node into (cur, v1, f1).
+
+    Exactly one of rowbuf, threads is an array, the other None: rowbuf (ROWBUF_ROWS, nx + 1)
+    runs the serial kernel, threads (blocks, ROWBUF_ROWS, nx + 1) the threaded one. err =
+    (per-row sums (2, ny), per-node scratch (node_count,), per-node scratch (node_count,)).
+
+    Numba drops a branch at compile time only on an argument typed None, hence the pair: only
+    the kernel in use is compiled. Inlined (Numba IR) into the step kernel: one compiled level
+    less (each level re-optimises and re-emits the machine code of everything below it, which
+    is most of the first run's compile time)."""
     err_rows, err_num, err_den = err
     nx, ny = grid
     mass, inv_mass, charge, coef, inv_l02 = fab
     kind, fung_h, u_crit, rate = mat
     efield, bfield, region, z0, grav = fld
-    if t_seg.shape[0] > 1:
-        fused_iterate_threads(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind,
-                              fung_h, u_crit, rate, mass, inv_mass, charge, phi, dt, efield,
-                              bfield, region, z0, grav, skip_err, cur, v1, f1, err_rows, err_num,
-                              err_den, t_seg)
+    if rowbuf is None:
+        if threads is not None:
+            fused_iterate_threads(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02,
+                                  kind, fung_h, u_crit, rate, mass, inv_mass, charge, phi, dt,
+                                  efield, bfield, region, z0, grav, skip_err, cur, v1, f1,
+                                  err_rows, err_num, err_den, threads)
     else:
         fused_iterate(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind, fung_h,
                       u_crit, rate, mass, inv_mass, charge, phi, dt, efield, bfield, region, z0,
-                      grav, skip_err, cur, v1, f1, err_rows, err_num, err_den, t_seg)
+                      grav, skip_err, cur, v1, f1, err_rows, err_num, err_den, rowbuf)
 
 
-@njit(cache=True)
-def attempt_step(grid, fab, mat, fld, body, sin, sout, work, phi, dt, tol, kmax, accel):
+@njit(cache=True, nogil=True)
+def attempt_step(grid, fab, mat, fld, body, sin, sout, work, rowbuf, threads, phi, dt, tol,
+                 kmax, accel):
     """Iterate the coupled step to ϖ_K ≤ tol within kmax iterations.
 
     Returns (status, K, ϖ_K, contact count). On CONVERGED, sout holds the state at t + Δt and
@@ -85,9 +95,7 @@ def attempt_step(grid, fab, mat, fld, body, sin, sout, work, phi, dt, tol, kmax,
     has_body, radius, b_mass, b_inertia, q_pos, q_val, mu_s, mu_d = body
     x0, v0, f0, alpha_c, b_in = sin
     x1, v1, f1, alpha_t, b_out = sout
-    xbuf, t_seg, err_work, cand, flag, c_node, c_imp, c_arm, c_proj, sum_buf = work
-    x_mix, d_f, d_g, f_prev, g_prev, gram = accel
-    anderson = d_f.shape[0] > 0
+    xbuf, err_work, cand, flag, c_node, c_imp, c_arm, c_proj, sum_buf = work
     err_rows = err_work[0]
 
     # one pass over the start state: the fastest node (contact reach) and the size of the
@@ -101,7 +109,7 @@ def attempt_step(grid, fab, mat, fld, body, sin, sout, work, phi, dt, tol, kmax,
     ncand = 0
     if has_body:
         # contact candidates: nodes that can reach the body within this step
-        speed = math.sqrt(np.sum(b_in[1] ** 2)) + radius * math.sqrt(np.sum(b_in[2] ** 2))
+        speed = norm(b_in[1]) + radius * norm(b_in[2])
         reach = 1.05 * radius + 2.0 * dt * (speed + math.sqrt(vmax))
         ncand = find_candidates(x0, inv_mass, b_in[0], reach, cand, flag)
     else:
@@ -109,25 +117,26 @@ def attempt_step(grid, fab, mat, fld, body, sin, sout, work, phi, dt, tol, kmax,
 
     imp_force = np.zeros(3)
     imp_moment = np.zeros(3)
-    b_out[:] = b_in
+    copy_into(b_out, b_in)
     # iterate K-1 is read from `prev`, iterate K written to `cur`; iterate 0 is x0 (ϖ_0 = 1).
     # Plain fixed point: prev and cur alternate between xbuf and x1. Anderson: cur is always
-    # x1 = G(prev) and the next prev is the mixed iterate in x_mix.
-    xbuf[:] = x0
-    if anderson:
-        x_mix[:] = x0
+    # x1 = G(prev) and the next prev is the mixed iterate in accel[0]. accel is None for the
+    # plain fixed point: Numba then drops the Anderson branches when it compiles this kernel.
+    copy_into(xbuf, x0)
+    if accel is not None:
+        copy_into(accel[0], x0)
     err = 1.0
     nc = 0
     k = 0
     for k in range(1, kmax + 1):
-        if anderson:
-            prev = x_mix
+        if accel is not None:
+            prev = accel[0]
             cur = x1
         else:
             prev = xbuf if k % 2 == 1 else x1
             cur = x1 if k % 2 == 1 else xbuf
         fabric_iterate(grid, fab, mat, fld, prev, x0, v0, f0, alpha_c, flag, cur, v1, f1,
-                       alpha_t, t_seg, err_work, phi, dt)
+                       alpha_t, rowbuf, threads, err_work, phi, dt)
         num_b = 0.0
         den_b = 0.0
         if has_body:
@@ -148,15 +157,15 @@ def attempt_step(grid, fab, mat, fld, body, sin, sout, work, phi, dt, tol, kmax,
         err_b = num_b / den_b if den_b > 0.0 else (0.0 if num_b == 0.0 else 1.0)
         err = max(err_f, err_b)
         if not (math.isfinite(num) and math.isfinite(den) and math.isfinite(num_b)):
-            if k % 2 == 0 and not anderson:
-                x1[:] = xbuf
+            if accel is None and k % 2 == 0:
+                copy_into(x1, xbuf)
             return NOT_FINITE, k, math.inf, nc
         if err <= tol:
             break
-        if anderson:
-            anderson_mix(k, x_mix, x1, d_f, d_g, f_prev, g_prev, gram)
-    if k % 2 == 0 and not anderson:
-        x1[:] = xbuf
+        if accel is not None:
+            anderson_mix(k, accel[0], x1, accel[1], accel[2], accel[3], accel[4], accel[5])
+    if accel is None and k % 2 == 0:
+        copy_into(x1, xbuf)
     if err > tol:
         return NOT_CONVERGED, k, err, nc
     if has_body and _nodes_inside(x1, inv_mass, flag, b_out[0], radius) > 0:
