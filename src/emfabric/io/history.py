@@ -11,7 +11,13 @@ import xarray as xr
 
 from emfabric._kernels import diagnostics as _k
 from emfabric.diagnostics import fabric_diagnostics
-from emfabric.io.atomic import write_atomic
+from emfabric.io.netcdf import (
+    CONVENTIONS,
+    REFERENCES,
+    TIME_ATTRS,
+    write_netcdf,
+    xyz_coordinate,
+)
 from emfabric.model import Model, State
 
 # name -> (width, units, long name); width 3 means a (time, xyz) variable
@@ -100,11 +106,7 @@ class Recorder:
                                              "contact_nodes", "broken_yarns"):
                     vals = vals.astype(np.int64)
                 data[name] = (("time",), vals, meta)
-        coords = {
-            "time": ("time", rows[:, 0].copy(), {"units": "s", "long_name": "simulated time",
-                                                 "standard_name": "time"}),
-            "xyz": ("xyz", np.array(["x", "y", "z"])),
-        }
+        coords = {"time": ("time", rows[:, 0].copy(), TIME_ATTRS), "xyz": xyz_coordinate()}
         ds = xr.Dataset(data, coords=coords, attrs=dict(attrs))
         return ds
 
@@ -116,7 +118,9 @@ def run_attributes(model: Model, status: str, end_reason: str, wall: float) -> d
     sc = model.scenario
     return {
         "title": f"emfabric run of scenario {sc.name!r}",
-        "Conventions": "CF-1.10",
+        "Conventions": CONVENTIONS,
+        "source": f"emfabric {__version__} (yarn-network impact simulation)",
+        "references": REFERENCES,
         "emfabric_version": __version__,
         "scenario_name": sc.name,
         "has_projectile": int(model.has_body),
@@ -131,4 +135,4 @@ def run_attributes(model: Model, status: str, end_reason: str, wall: float) -> d
 
 def write_history(ds: xr.Dataset, path: str | Path) -> None:
     """Write the dataset as netCDF4, atomically."""
-    write_atomic(path, lambda tmp: ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4"))
+    write_netcdf(ds, path)

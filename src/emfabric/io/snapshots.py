@@ -14,6 +14,7 @@ import numpy as np
 import xarray as xr
 
 from emfabric.io.atomic import write_atomic
+from emfabric.io.netcdf import TIME_ATTRS, write_netcdf, xyz_coordinate
 from emfabric.model import Model, State
 
 
@@ -52,21 +53,26 @@ class Snapshots:
                                 {"units": "1", "long_name": "yarn damage α (1 intact, 0 broken)"}),
                 "projectile_position": (("snapshot", "xyz"), body[:, 0],
                                         {"units": "m", "long_name": "projectile centre of mass"}),
-                "projectile_velocity": (("snapshot", "xyz"), body[:, 1], {"units": "m s-1"}),
-                "angular_velocity": (("snapshot", "xyz"), body[:, 2], {"units": "rad s-1"}),
+                "projectile_velocity": (("snapshot", "xyz"), body[:, 1],
+                                        {"units": "m s-1",
+                                         "long_name": "projectile centre-of-mass velocity"}),
+                "angular_velocity": (("snapshot", "xyz"), body[:, 2],
+                                     {"units": "rad s-1", "long_name":
+                                      "projectile angular velocity (inertial frame)"}),
                 "projectile_rotation": (("snapshot", "xyz", "body_axis"), body[:, 5:8],
                                         {"units": "1",
                                          "long_name": "rotation matrix body -> inertial frame"}),
                 "segment_nodes": (("segment", "end"), m.seg_nodes,
-                                  {"long_name": "node indices of each yarn segment"}),
+                                  {"units": "1",
+                                   "long_name": "node indices of each yarn segment"}),
                 "reference_position": (("node", "xyz"), m.node_x0.T,
                                        {"units": "m", "long_name": "node position at t = 0"}),
                 "projectile_nose_body": (("xyz",), m.body_nose,
                                          {"units": "m", "long_name": "nose marker, body frame"}),
             },
             coords={
-                "time": ("snapshot", np.array(self.times), {"units": "s", "standard_name": "time"}),
-                "xyz": ("xyz", np.array(["x", "y", "z"])),
+                "time": ("snapshot", np.array(self.times), TIME_ATTRS),
+                "xyz": xyz_coordinate(),
             },
             attrs={**attrs, "grid_nx": m.nx, "grid_ny": m.ny,
                    "projectile_radius": m.body_radius if m.has_body else 0.0,
@@ -78,8 +84,7 @@ class Snapshots:
         if self.out_dir is None or not self.times:
             return
         ds = self.to_dataset(attrs)
-        write_atomic(self.out_dir / "snapshots.nc",
-                     lambda tmp: ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4"))
+        write_netcdf(ds, self.out_dir / "snapshots.nc")
         self._write_pvd("fabric")
         if self.model.has_body:
             self._write_pvd("projectile")
