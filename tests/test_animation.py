@@ -101,3 +101,17 @@ def test_failed_render_leaves_no_movie(movie_run, tmp_path, monkeypatch):
     with pytest.raises(RuntimeError, match="boom"):
         animation.animate(run_dir, gif=True)
     assert list((run_dir / "figures").iterdir()) == []
+
+
+def test_without_ffmpeg_the_gif_still_works_and_mp4_says_what_to_install(movie_run, tmp_path,
+                                                                         monkeypatch, caplog):
+    """imageio-ffmpeg is an optional extra: without it an MP4 request names the extra, and a
+    GIF is written by Pillow alone."""
+    monkeypatch.setattr(animation, "mp4_available", lambda: False)
+    with pytest.raises(RuntimeError, match=r"emfabric\[mp4\]"):
+        animation.animate(movie_run)
+    with caplog.at_level(logging.WARNING, logger="emfabric.animation"):
+        files = animation.animate(movie_run, gif=True)
+    assert files == [movie_run / "figures" / "impact.gif"]
+    assert any("emfabric[mp4]" in r.getMessage() for r in caplog.records)
+    assert iio.improps(files[0], index=None).shape[0] == snapshot_count(movie_run)

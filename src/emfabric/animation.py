@@ -9,17 +9,17 @@ only; never imports the simulator.
 from __future__ import annotations
 
 import logging
-import os
 from collections.abc import Iterator
+from contextlib import ExitStack
 from pathlib import Path
 
 import imageio
-import imageio_ffmpeg
 import matplotlib
 import numpy as np
 import xarray as xr
 from matplotlib.colors import Normalize
 
+from emfabric.io.atomic import atomic_path
 from emfabric.plots import (
     STYLE,
     SheetView,
@@ -86,55 +86,66 @@ def render_frames(snapshots: xr.Dataset, history: xr.Dataset | None = None,
         yield np.ascontiguousarray(frame)
 
 
-class _PartialFile:
-    """A movie written under a hidden partial name and renamed into place only when complete."""
-
-    def __init__(self, path: Path):
-        self.path = path
-        self.tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
-
-    def close(self, ok: bool) -> None:
-        self._w.close()
-        if ok:
-            os.replace(self.tmp, self.path)
-        else:
-            self.tmp.unlink(missing_ok=True)
-
-
-class _Mp4Writer(_PartialFile):
-    """H.264 MP4 through imageio's ffmpeg plugin (bundled ffmpeg binary)."""
+class _Mp4Writer:
+    """H.264 MP4 through imageio's ffmpeg plugin (the ffmpeg binary of the optional
+    imageio-ffmpeg package), streamed frame by frame."""
 
     def __init__(self, path: Path, fps: int):
-        super().__init__(path)
-        self._w = imageio.get_writer(self.tmp, format="FFMPEG", mode="I", fps=fps,
+        self.path = path
+        self._w = imageio.get_writer(path, format="FFMPEG", mode="I", fps=fps,
                                      codec="libx264", quality=8, pixelformat="yuv420p",
                                      macro_block_size=16)
 
     def append(self, frame: np.ndarray) -> None:
         self._w.append_data(frame)
 
+    def close(self) -> None:
+        self._w.close()
 
-class _GifWriter(_PartialFile):
-    """Looping GIF at half resolution, streamed to ffmpeg with a palette per frame."""
+
+class _GifWriter:
+    """Looping GIF at half resolution with a palette per frame, by Pillow (no ffmpeg needed).
+
+    Frames are kept as 8-bit palette images (a quarter of the pixels, one byte each) until
+    close(), when Pillow writes the file."""
 
     def __init__(self, path: Path, fps: int, size: tuple[int, int]):
-        super().__init__(path)
+        self.path = path
         self.size = (size[0] // 2, size[1] // 2)
-        palette = "split[a][b];[a]palettegen=stats_mode=single[p];[b][p]paletteuse=new=1"
-        self._w = imageio_ffmpeg.write_frames(
-            str(self.tmp), self.size, fps=fps, codec="gif", pix_fmt_out="pal8", quality=None,
-            macro_block_size=1, ffmpeg_log_level="error",
-            output_params=["-filter_complex", palette, "-loop", "0", "-f", "gif"])
-        self._w.send(None)
+        self.duration_ms = 1000.0 / fps
+        self._frames: list = []
 
     def append(self, frame: np.ndarray) -> None:
+        from PIL import Image
+
         h, w = self.size[1], self.size[0]
         # 2 x 2 box average: half size without aliasing the thin yarn lines
         small = frame[: 2 * h, : 2 * w].reshape(h, 2, w, 2, 3).mean(axis=(1, 3))
-        self._w.send(np.ascontiguousarray(small.round().astype(np.uint8)))
+        image = Image.fromarray(np.ascontiguousarray(small.round().astype(np.uint8)))
+        self._frames.append(image.quantize(colors=256, method=Image.Quantize.MEDIANCUT))
+
+    def close(self) -> None:
+        first, *rest = self._frames
+        first.save(self.path, format="GIF", save_all=True, append_images=rest,
+                   duration=self.duration_ms, loop=0, disposal=1)
 
 
-def animate(run_dir: Path, gif: bool = False, fps: int = 10) -> list[Path]:
+def mp4_available() -> bool:
+    """Whether the optional ffmpeg binary for MP4 (the `mp4` extra) is installed."""
+    try:
+        import imageio_ffmpeg
+
+        imageio_ffmpeg.get_ffmpeg_exe()
+    except (ImportError, RuntimeError):
+        return False
+    return True
+
+
+MP4_MISSING = ("MP4 needs the ffmpeg binary of imageio-ffmpeg, an optional extra: "
+               "pip install 'emfabric[mp4]'. GIFs (--gif) and figures work without it.")
+
+
+def animate(run_dir: Path, gif: bool = False, fps: int = 10, mp4: bool = True) -> list[Path]:
     """Write ``RUN/figures/impact.mp4`` (and ``impact.gif``), one frame per snapshot.
 
     Returns the files written. A run that did not complete is animated as far as it got,
@@ -143,6 +154,11 @@ def animate(run_dir: Path, gif: bool = False, fps: int = 10) -> list[Path]:
     run_dir = Path(run_dir)
     if fps < 1:
         raise ValueError(f"fps must be at least 1, got {fps}")
+    if mp4 and not mp4_available():
+        if not gif:
+            raise RuntimeError(MP4_MISSING)
+        log.warning("%s Writing the GIF only.", MP4_MISSING)
+        mp4 = False
     history = open_history(run_dir) if (run_dir / "history.nc").is_file() else None
     out_dir = run_dir / "figures"
     with open_snapshots(run_dir) as snaps:
@@ -150,16 +166,21 @@ def animate(run_dir: Path, gif: bool = False, fps: int = 10) -> list[Path]:
         if note:
             log.warning("%s is not a complete run (%s); animating what it holds", run_dir, note)
         out_dir.mkdir(parents=True, exist_ok=True)
-        writers: list[_Mp4Writer | _GifWriter] = [_Mp4Writer(out_dir / "impact.mp4", fps)]
-        if gif:
-            writers.append(_GifWriter(out_dir / "impact.gif", fps, FRAME_SIZE))
-        ok = False
-        try:
-            for frame in render_frames(snaps, history, FRAME_SIZE):
+        with ExitStack() as stack:
+            writers: list[_Mp4Writer | _GifWriter] = []
+            # each movie is written under a hidden temporary name and renamed into place only
+            # when it is complete (a failed render leaves nothing)
+            if mp4:
+                tmp = stack.enter_context(atomic_path(out_dir / "impact.mp4"))
+                writers.append(_Mp4Writer(tmp, fps))
+            if gif:
+                tmp = stack.enter_context(atomic_path(out_dir / "impact.gif"))
+                writers.append(_GifWriter(tmp, fps, FRAME_SIZE))
+            try:
+                for frame in render_frames(snaps, history, FRAME_SIZE):
+                    for w in writers:
+                        w.append(frame)
+            finally:
                 for w in writers:
-                    w.append(frame)
-            ok = True
-        finally:
-            for w in writers:
-                w.close(ok)
-    return [w.path for w in writers]
+                    w.close()
+    return [p for p, on in ((out_dir / "impact.mp4", mp4), (out_dir / "impact.gif", gif)) if on]

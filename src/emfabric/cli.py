@@ -11,6 +11,7 @@ from typing import Annotated
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
@@ -22,7 +23,51 @@ app = typer.Typer(
     help="Simulate a rigid projectile striking electromagnetically sensitive fabric.",
 )
 console = Console(stderr=True)
+"""Messages, progress and the summary table: stderr."""
 out_console = Console()
+"""Tables meant for reading on stdout (`scenarios`); machine-readable output uses emit()."""
+
+
+def error(message: str) -> None:
+    """An error line on stderr: user text is never read as console markup, and long lines
+    are not wrapped (a piped message stays one line)."""
+    console.print("[bold red]error:[/] " + escape(str(message)), highlight=False,
+                  soft_wrap=True)
+
+
+def emit(text: str) -> None:
+    """Machine-readable output (JSON, file paths, TOML) on stdout, exactly as given."""
+    sys.stdout.write(text if text.endswith("\n") else text + "\n")
+    sys.stdout.flush()
+
+
+def _version(value: bool) -> None:
+    if value:
+        from emfabric import __version__
+
+        emit(f"emfabric {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _main(
+    version: Annotated[bool, typer.Option(
+        "--version", callback=_version, is_eager=True, help="Print the version and exit")] = False,
+) -> None:
+    """Simulate a rigid projectile striking electromagnetically sensitive fabric."""
+
+
+def show_messages() -> None:
+    """Send emfabric's log messages (compiling kernels, incomplete runs, ...) to stderr."""
+    import logging
+
+    from rich.logging import RichHandler
+
+    logger = logging.getLogger("emfabric")
+    if not any(isinstance(h, RichHandler) for h in logger.handlers):
+        logger.addHandler(RichHandler(console=console, show_time=False, show_path=False,
+                                      show_level=False, markup=False))
+    logger.setLevel(logging.INFO)
 
 
 def _load(scenario: str, overrides: list[str] | None):
@@ -30,7 +75,7 @@ def _load(scenario: str, overrides: list[str] | None):
         pairs = dict(parse_override(o) for o in (overrides or []))
         return load_scenario(scenario, pairs)
     except ScenarioError as err:
-        console.print(f"[bold red]error:[/] {err}", highlight=False)
+        error(str(err))
         raise typer.Exit(2) from None
 
 
@@ -55,6 +100,7 @@ def run(
     from emfabric.runner import run as run_scenario
 
     sc = _load(scenario, set_)
+    show_messages()
     out_dir = out if out is not None else Path("runs") / sc.name
     signal.signal(signal.SIGTERM, _sigterm_as_interrupt)
     t_end = sc.solver.end_time
@@ -93,7 +139,7 @@ def run(
             console.print("[yellow]interrupted[/]: the history written so far is marked partial")
         except Exception as exc:  # DivergenceError and friends
             result = getattr(exc, "result", None)
-            console.print(f"[bold red]error:[/] {exc}", highlight=False)
+            error(str(exc))
     if result is None:
         raise typer.Exit(1)
     _print_summary(result, json_summary)
@@ -101,7 +147,8 @@ def run(
         from emfabric.plots import plot_runs
 
         files = plot_runs([out_dir])
-        console.print(f"figures: {out_dir / 'figures'} ({len(files)} files)")
+        for f in files:
+            emit(str(f))
     if result.status != "complete":
         raise typer.Exit(130 if result.status == "partial" else 1)
 
@@ -109,7 +156,7 @@ def run(
 def _print_summary(result, as_json: bool) -> None:
     s = result.summary
     if as_json:
-        out_console.print_json(json.dumps(s))
+        emit(json.dumps(s, indent=2))
         return
     table = Table(title=f"{result.model.scenario.name}: {s['status']} ({s['end_reason']})",
                   show_header=False)
@@ -145,12 +192,12 @@ def validate(
     try:
         model = build_model(sc)
     except ScenarioError as err:
-        console.print(f"[bold red]error:[/] {err}", highlight=False)
+        error(str(err))
         raise typer.Exit(2) from None
     console.print(f"[green]ok[/]: {sc.name}: {model.nx} x {model.ny} nodes, "
                   f"{model.seg_count} yarn segments, projectile: {sc.projectile.shape}")
     if show:
-        out_console.print(sc.to_toml(), highlight=False, markup=False)
+        emit(sc.to_toml())
 
 
 @app.command()
@@ -166,7 +213,7 @@ def main() -> None:  # pragma: no cover - console entry
     try:
         app()
     except ScenarioError as err:
-        console.print(f"[bold red]error:[/] {err}")
+        error(str(err))
         sys.exit(2)
 
 

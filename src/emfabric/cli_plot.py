@@ -2,28 +2,16 @@
 
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from emfabric.cli import app, console
-
-
-def _show_warnings() -> None:
-    """Send the plotting modules' warnings (e.g. "not a complete run") to the console."""
-    from rich.logging import RichHandler
-
-    for name in ("emfabric.plots", "emfabric.animation"):
-        logger = logging.getLogger(name)
-        if not any(isinstance(h, RichHandler) for h in logger.handlers):
-            logger.addHandler(RichHandler(console=console, show_time=False, show_path=False))
-        logger.setLevel(logging.INFO)
+from emfabric.cli import app, emit, error, show_messages
 
 
 def _missing(err: FileNotFoundError) -> typer.Exit:
-    console.print(f"[bold red]error:[/] {err}", highlight=False)
+    error(str(err))
     return typer.Exit(2)
 
 
@@ -36,28 +24,39 @@ def plot(
     """Draw the spin, impact-sequence, energy and velocity figures (PNG and PDF)."""
     from emfabric.plots import plot_runs
 
-    _show_warnings()
+    show_messages()
     try:
         files = plot_runs(runs, out)
     except FileNotFoundError as err:
         raise _missing(err) from None
     for f in files:
-        console.print(str(f))
+        emit(str(f))
 
 
 @app.command()
 def animate(
     run_dir: Annotated[Path, typer.Argument(help="Run folder")],
     gif: Annotated[bool, typer.Option("--gif", help="Also write a GIF")] = False,
+    mp4: Annotated[bool, typer.Option(
+        "--mp4/--no-mp4", help="Write the MP4 (needs the `mp4` extra: imageio-ffmpeg)")] = True,
     fps: Annotated[int, typer.Option(min=1, help="Frames per second")] = 10,
 ) -> None:
-    """Write an MP4 (and GIF) of the impact from the run's snapshots."""
+    """Write an MP4 (and GIF) of the impact from the run's snapshots; prints their paths."""
+    from emfabric.animation import MP4_MISSING
     from emfabric.animation import animate as make
 
-    _show_warnings()
+    show_messages()
+    if not (mp4 or gif):
+        error("nothing to write: --no-mp4 without --gif")
+        raise typer.Exit(2)
     try:
-        files = make(run_dir, gif=gif, fps=fps)
+        files = make(run_dir, gif=gif, fps=fps, mp4=mp4)
     except FileNotFoundError as err:
         raise _missing(err) from None
+    except RuntimeError as err:
+        if str(err) != MP4_MISSING:
+            raise
+        error(MP4_MISSING)
+        raise typer.Exit(2) from None
     for f in files:
-        console.print(str(f))
+        emit(str(f))

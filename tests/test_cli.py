@@ -1,0 +1,38 @@
+"""Command-line conventions: data on stdout, messages on stderr, errors never wrapped or
+read as markup, `--version`."""
+
+import json
+import subprocess
+import sys
+
+from emfabric import __version__
+
+EXE = [sys.executable, "-m", "emfabric"]
+
+
+def _run(*args):
+    return subprocess.run(EXE + list(args), capture_output=True, text=True)
+
+
+def test_version():
+    """`emfabric --version` prints the package version on stdout."""
+    r = _run("--version")
+    assert r.returncode == 0 and r.stdout.strip() == f"emfabric {__version__}"
+
+
+def test_error_message_is_one_unwrapped_line_with_the_text_as_given():
+    """A long error message piped to a file stays on one line, and brackets in the user's
+    value are printed, not taken as console markup."""
+    value = "[/x] not-an-edge-condition-" + "z" * 90
+    r = _run("validate", "demo-small", "--set", f"fabric.edges={value}")
+    assert r.returncode == 2 and r.stdout == ""
+    assert any(value in line for line in r.stderr.splitlines())
+
+
+def test_json_summary_alone_on_stdout(tmp_path):
+    """`run --json` writes only the JSON summary on stdout (messages go to stderr)."""
+    r = _run("run", "demo-small", "--out", str(tmp_path / "d"), "--json", "-q",
+             "--set", "fabric.nodes=[8,8]", "--set", "solver.end_time=2e-6")
+    assert r.returncode == 0, r.stderr
+    summary = json.loads(r.stdout)
+    assert summary["status"] == "complete" and summary["steps"] > 0
