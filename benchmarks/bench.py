@@ -211,7 +211,7 @@ def bench_evaluation(n: int, threads: list[int], repeats: int, use_warp: bool) -
     model, integ, s = deformed_sheet(n)
     s2 = s.copy()
     args = iterate_args(integ, s, s2, DT)
-    xbuf, err_work, flag = args[4], args[15], args[9]
+    xbuf, err_work, flag = args[4], args[16], args[9]
     err_rows = err_work[0] if isinstance(err_work, tuple) else err_work
     flag[:] = 0  # no contact candidates: every free node counts in the error measure
     fabric_iterate(*args)
