@@ -60,13 +60,10 @@ ROWBUF_ROWS = 27
 
 @njit(cache=True)
 def _tensions(xa_x, xa_y, xa_z, xb_x, xb_y, xb_z, count, il2, alpha_c, alpha_t, coef, kind,
-              fung_h, u_crit, rate, buf, tx, ty, tz):
-    """Tension vectors of `count` segments joining a[i] to b[i] (row views) into
-    (tx, ty, tz)[:count], and their trial damage into alpha_t[:count].
+              fung_h, u_crit, rate, buf, out, write_alpha):
+    """Tension vectors of `count` segments joining a[i] to b[i] (row views) into out[:, :count].
 
-    Split into short loops over few arrays so that the compiler vectorises them. Every call
-    passes the same argument types (1-D C-contiguous rows, no constant flags), so the kernel is
-    compiled once.
+    Split into short loops over few arrays so that the compiler vectorises them.
     """
     dx, dy, dz = buf[_D], buf[_D + 1], buf[_D + 2]
     u2 = buf[_U2]
@@ -84,8 +81,10 @@ def _tensions(xa_x, xa_y, xa_z, xb_x, xb_y, xb_z, count, il2, alpha_c, alpha_t, 
         if u2[i] > uc2 and rate > 0.0:
             alpha = min(alpha, math.exp(-rate * (math.sqrt(u2[i]) - u_crit) / u_crit))
         al[i] = alpha
-    for i in range(count):
-        alpha_t[i] = al[i]
+    if write_alpha:
+        for i in range(count):
+            alpha_t[i] = al[i]
+    tx, ty, tz = out[0], out[1], out[2]
     if kind == MATERIAL_FUNG:
         for i in range(count):
             al[i] = al[i] * coef[i] * _stress_factor(u2[i], kind, fung_h)
@@ -117,12 +116,11 @@ def _row_block(j0, j1, prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02
     twp[:, 0] = 0.0
     twp[:, nx] = 0.0
     if j0 > 0:
-        # the row below the block belongs to the block below: its damage goes to a scratch row
         a = (j0 - 1) * nx
         _tensions(xx[a:a + nx], xy[a:a + nx], xz[a:a + nx], xx[a + nx:a + 2 * nx],
                   xy[a + nx:a + 2 * nx], xz[a + nx:a + 2 * nx], nx, il_f,
-                  alpha_c[nw + a:nw + a + nx], buf[_INV, :nx],
-                  coef[nw + a:nw + a + nx], kind, fung_h, u_crit, rate, buf, td[0], td[1], td[2])
+                  alpha_c[nw + a:nw + a + nx], alpha_t[nw + a:nw + a + nx],
+                  coef[nw + a:nw + a + nx], kind, fung_h, u_crit, rate, buf, td, False)
     else:
         td[:] = 0.0
     f = buf[_F:_F + 3]
@@ -140,12 +138,11 @@ def _row_block(j0, j1, prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02
         _tensions(xx[nb:e - 1], xy[nb:e - 1], xz[nb:e - 1], xx[nb + 1:e], xy[nb + 1:e],
                   xz[nb + 1:e], nx - 1, il_w, alpha_c[sb:sb + nx - 1],
                   alpha_t[sb:sb + nx - 1], coef[sb:sb + nx - 1], kind, fung_h, u_crit, rate,
-                  buf, twp[0, 1:], twp[1, 1:], twp[2, 1:])
+                  buf, twp[:, 1:], True)
         if j < ny - 1:
             _tensions(xx[nb:e], xy[nb:e], xz[nb:e], xx[e:e + nx], xy[e:e + nx], xz[e:e + nx],
                       nx, il_f, alpha_c[nw + nb:nw + e], alpha_t[nw + nb:nw + e],
-                      coef[nw + nb:nw + e], kind, fung_h, u_crit, rate, buf, tu[0], tu[1],
-                      tu[2])
+                      coef[nw + nb:nw + e], kind, fung_h, u_crit, rate, buf, tu, True)
         else:
             tu[:, :nx] = 0.0
         m = mass[nb:e]
