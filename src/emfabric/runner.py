@@ -76,7 +76,7 @@ def run(
     # on a cold kernel cache, run serially and compile the threaded kernel beside the run
     deferred = integ.defer_threads()
     if not is_compiled(integ.variant()):
-        log.info("compiling kernels (first run only, about 20 s; cached in %s)" if
+        log.info("compiling kernels (first run only, about half a minute; cached in %s)" if
                  CACHE_PERSISTENT else "compiling kernels (no writable cache folder: "
                  "every run compiles; cached in %s for this process)", CACHE_DIR)
     s_in = model.state()
