@@ -6,6 +6,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 import emfabric._kernels as kernels
 
 PROBE = ("import numpy as np, emfabric._kernels as k; from emfabric._kernels.sums import fsum; "
@@ -44,7 +46,7 @@ def test_cache_honours_numba_cache_dir_and_never_writes_the_package(tmp_path):
 def test_cache_defaults_to_the_users_cache_directory(tmp_path):
     """Without NUMBA_CACHE_DIR the kernels go to the user's cache directory (XDG on Linux)."""
     if not sys.platform.startswith("linux"):
-        return
+        pytest.skip("XDG_CACHE_HOME is the Linux convention")
     folder, persistent = _probe({"XDG_CACHE_HOME": str(tmp_path)})
     assert persistent and folder.parent == tmp_path / "emfabric"
     assert list(folder.glob("sums.fsum-*.nbi"))

@@ -93,6 +93,7 @@ class Integrator:
         # threads pay off on large sheets only; block size fixed, so results never depend on them
         self._use_threads(threads if threads is not None else (
             n >= THREADS_FROM_NODES and numba.config.NUMBA_NUM_THREADS > 1))
+        self._deferred = False  # serial until the threaded kernel is compiled
         self._background: threading.Thread | None = None
         self._background_ok = False
         self.work = (
@@ -130,8 +131,12 @@ class Integrator:
         m = self.model
         self.threaded = on
         self.rowbuf = None if on else np.empty((ROWBUF_ROWS, m.nx + 1))
-        self.threads = (np.empty((-(-m.ny // ROWS_PER_BLOCK), ROWBUF_ROWS, m.nx + 1))
-                        if on else None)
+        self.threads = self._threads_buffer() if on else None
+
+    def _threads_buffer(self) -> np.ndarray:
+        """Row buffers of the threaded kernel, one per row block."""
+        m = self.model
+        return np.empty((-(-m.ny // ROWS_PER_BLOCK), ROWBUF_ROWS, m.nx + 1))
 
     def variant(self, threaded: bool | None = None) -> str:
         """Name of the compiled step kernel this integrator runs (or would run threaded)."""
@@ -148,16 +153,14 @@ class Integrator:
         if not self.threaded or is_compiled(self.variant(True)):
             return False
         self._use_threads(False)
-        self._background_ok = False
+        self._deferred = True
         return True
 
     def start_background_compile(self, s_in: State, s_out: State) -> None:
         """Compile the threaded step kernel in a background thread (after defer_threads)."""
-        if self.threaded or self._background is not None or not self.defer_pending:
+        if not self._deferred or self._background is not None:
             return
-        m = self.model
-        args = self._args(s_in, s_out, 0.0, None,
-                          np.empty((-(-m.ny // ROWS_PER_BLOCK), ROWBUF_ROWS, m.nx + 1)))
+        args = self._args(s_in, s_out, 0.0, None, self._threads_buffer())
         sig = tuple(numba.typeof(a) for a in args)
 
         def compile_threaded() -> None:
@@ -170,12 +173,6 @@ class Integrator:
         self._background = threading.Thread(target=compile_threaded, name="emfabric-compile",
                                             daemon=True)
         self._background.start()
-
-    @property
-    def defer_pending(self) -> bool:
-        """Deferred to the serial kernel and not switched back yet."""
-        return (not self.threaded and self.model.node_count >= THREADS_FROM_NODES
-                and numba.config.NUMBA_NUM_THREADS > 1 and not self._background_ok)
 
     @property
     def compiling_in_background(self) -> bool:
@@ -200,7 +197,9 @@ class Integrator:
         m = self.model
         bg = self._background
         if bg is not None and not bg.is_alive():
+            # one try: on failure the serial kernel simply stays in use
             self._background = None
+            self._deferred = False
             if self._background_ok:
                 mark_compiled(self.variant(True))
                 self._use_threads(True)
