@@ -137,34 +137,34 @@ def deformed_sheet(n: int):
     """A paper-field n×n sheet (no projectile) dented and moving: (model, integrator, state)."""
     from emfabric import load_scenario
     from emfabric.builder import build_model
-    from emfabric.integrator import Integrator, initial_forces
+    from emfabric.integrator import Integrator
+    from emfabric.state import initial_state, update_forces
 
     sc = load_scenario(SCENARIO, {"fabric.nodes": [n, n], "projectile.shape": "none"})
     model = build_model(sc)
     integ = Integrator(model)
-    s = model.state()
+    s = initial_state(model)
     rho2 = (s.node_x[0] ** 2 + s.node_x[1] ** 2) / BUMP_RADIUS**2
-    shape = np.where(rho2 < 1.0, (1.0 - rho2) ** 2, 0.0) * (model.node_inv_mass > 0)
+    shape = np.where(rho2 < 1.0, (1.0 - rho2) ** 2, 0.0) * (model.nodes.inv_mass > 0)
     s.node_x[2] = -BUMP_DEPTH * shape
     s.node_v[2] = -BUMP_SPEED * shape
-    initial_forces(model, s)  # ψ(t) of the dented state
+    update_forces(model, s)  # ψ(t) of the dented state
     return model, integ, s
 
 
 def stretch(model, x: np.ndarray) -> np.ndarray:
     """Stretch U = L/L0 of every segment at positions x, shape (seg_count,)."""
-    a, b = model.seg_nodes[:, 0], model.seg_nodes[:, 1]
-    return np.sqrt(np.sum((x[:, b] - x[:, a]) ** 2, axis=0)) / model.seg_rest_length
+    a, b = model.yarns.ends[:, 0], model.yarns.ends[:, 1]
+    return np.sqrt(np.sum((x[:, b] - x[:, a]) ** 2, axis=0)) / model.yarns.rest_length
 
 
 def iterate_args(integ, s, s2, dt: float) -> tuple:
     """fabric_iterate's arguments for one iterate from state s into s2, in the integrator's own
     workspace (its layout is the kernel's business): the first iterate of a step at dt."""
-    xbuf, err_work, _cand, flag, *_ = integ.work
-    xbuf[:] = s.node_x
-    return (integ.grid, integ.fab, integ.mat, integ.fld, xbuf, s.node_x, s.node_v, s.node_f,
-            s.seg_alpha, flag, s2.node_x, s2.node_v, s2.node_f, s2.seg_alpha, integ.rowbuf,
-            integ.threads, err_work, integ.phi, dt)
+    work = integ.work
+    work.xbuf[:] = s.node_x
+    return (integ.physics, work.xbuf, s.arrays, work.flag, s2.node_x, s2.node_v, s2.node_f,
+            s2.seg_alpha, work, integ.rowbuf, integ.threads, s.t + dt, integ.phi, dt)
 
 
 @functools.cache
@@ -175,11 +175,11 @@ def _compiled_repeat():
     from emfabric._kernels.step import fabric_iterate
 
     @njit
-    def repeat(count, grid, fab, mat, fld, prev, x0, v0, f0, alpha_c, skip_err, cur, v1, f1,
-               alpha_t, rowbuf, threads, err_work, phi, dt):
+    def repeat(count, phys, prev, start, skip_err, cur, v1, f1, alpha_t, work, rowbuf, threads,
+               t1, phi, dt):
         for _ in range(count):
-            fabric_iterate(grid, fab, mat, fld, prev, x0, v0, f0, alpha_c, skip_err, cur, v1,
-                           f1, alpha_t, rowbuf, threads, err_work, phi, dt)
+            fabric_iterate(phys, prev, start, skip_err, cur, v1, f1, alpha_t, work, rowbuf,
+                           threads, t1, phi, dt)
 
     return repeat
 
@@ -211,17 +211,18 @@ def bench_evaluation(n: int, threads: list[int], repeats: int, use_warp: bool) -
     model, integ, s = deformed_sheet(n)
     s2 = s.copy()
     args = iterate_args(integ, s, s2, DT)
-    xbuf, err_work, flag = args[4], args[16], args[9]
-    err_rows = err_work[0] if isinstance(err_work, tuple) else err_work
+    xbuf, flag, err_rows = integ.work.xbuf, integ.work.flag, integ.work.err_rows
     flag[:] = 0  # no contact candidates: every free node counts in the error measure
     fabric_iterate(*args)
     segs, nodes = model.seg_count, model.node_count
     u = stretch(model, s.node_x)
     res = {"n": n, "segs": segs, "nodes": nodes, "tension": np.mean(u > 1.0),
-           "past_crit": np.mean(u > model.critical_stretch), "max_u": u.max()}
+           "past_crit": np.mean(u > model.material.critical_stretch), "max_u": u.max()}
     # compulsory memory traffic: every input read once, every output written once
     reads = sum(x.nbytes for x in (xbuf, s.node_x, s.node_v, s.node_f, s.seg_alpha, flag,
-                                   *integ.fab))
+                                   *(getattr(model.nodes, k) for k in ("mass", "inv_mass",
+                                                                       "charge")),
+                                   model.yarns.stiffness, model.yarns.inv_rest2))
     writes = sum(x.nbytes for x in (s2.node_x, s2.node_v, s2.node_f, s2.seg_alpha))
     res["bytes_per_seg"] = (reads + writes) / segs
 
@@ -243,7 +244,11 @@ def bench_evaluation(n: int, threads: list[int], repeats: int, use_warp: bool) -
     if use_warp:
         import warp_kernels as wk
 
-        ev = wk.WarpEvaluation(integ.grid, integ.fab, integ.mat, integ.fld, xbuf, s.node_x,
+        nd, yr, mt, fd = model.nodes, model.yarns, model.material, model.field
+        ev = wk.WarpEvaluation((nd.nx, nd.ny), (nd.mass, nd.inv_mass, nd.charge, yr.stiffness,
+                                                yr.inv_rest2),
+                               (mt.kind, mt.fung_h, mt.critical_stretch, mt.damage_rate),
+                               (fd.E, fd.B, fd.region, fd.z0, fd.gravity), xbuf, s.node_x,
                                s.node_v, s.node_f, s.seg_alpha, flag, integ.phi, DT)
         ev.evaluate()
         theirs = ev.results()
@@ -317,15 +322,16 @@ def _step_loop(sc, steps: int, samples: list | None):
     appends 10 evenly spaced (state, candidate flags) pairs to `samples` when given one."""
     from emfabric.builder import build_model
     from emfabric.integrator import Integrator
+    from emfabric.state import initial_state
 
     t_end = sc.solver.end_time
     keep_at = set(np.linspace(max(1, steps // 10), steps, 10, dtype=int).tolist())
     t0 = time.perf_counter()
     model = build_model(sc)
     integ = Integrator(model)
-    s_in = model.state()
+    s_in = initial_state(model)
     s_out = s_in.copy()
-    flag = integ.work[3]
+    flag = integ.work.flag
     while s_in.steps < steps:
         integ.step(s_in, s_out, dt_limit=t_end - s_in.t)
         s_in, s_out = s_out, s_in
@@ -351,7 +357,7 @@ def bench_full_run(runs: int, repeats: int, base: dict) -> dict:
     # one evaluation timed on the states sampled along the run (contact candidates as that
     # step left them): the run's own mix of slack, stretched and damaging yarns
     per_eval, tension, past = [], [], []
-    flag = integ.work[3]
+    flag = integ.work.flag
     for st, fl in samples:
         flag[:] = fl
         args = iterate_args(integ, st, st.copy(), st.dt)
@@ -359,7 +365,7 @@ def bench_full_run(runs: int, repeats: int, base: dict) -> dict:
                                         max(3, repeats // 2), target_s=0.1)[0])
         u = stretch(model, st.node_x)
         tension.append(np.mean(u > 1.0))
-        past.append(np.mean(u > model.critical_stretch))
+        past.append(np.mean(u > model.material.critical_stretch))
     return {"summaries": summaries, "loops": loops, "loop_steps": summaries[0]["steps"],
             "loop_evals": summaries[0]["force_evaluations"], "segs": model.seg_count,
             "eval": float(np.mean(per_eval)), "eval_range": (min(per_eval), max(per_eval)),
@@ -488,11 +494,12 @@ def child_memory(n: int) -> dict:
     from emfabric import load_scenario
     from emfabric.builder import build_model
     from emfabric.integrator import Integrator
+    from emfabric.state import initial_state
 
     rss0 = peak_rss()
     model = build_model(load_scenario(SCENARIO, {"fabric.nodes": [n, n]}))
     integ = Integrator(model)
-    s_in = model.state()
+    s_in = initial_state(model)
     s_out = s_in.copy()
     seen: set = set()
     fields = dataclasses.fields

@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from emfabric._kernels.body import field_wrench
+from emfabric._kernels.records import BODY_R0, BODY_ROWS, BODY_V, BODY_W, SHAPE_SPHERE, Body, Field
 from emfabric.builder import build_model
-from emfabric.diagnostics import body_inertia_world
 from emfabric.integrator import Integrator
+from emfabric.state import initial_state
 
 from conftest import make
 
@@ -25,12 +26,13 @@ def _spin(dt, steps, omega0):
                        "solver.max_iterations": 50})
     model = build_model(sc)
     integ = Integrator(model)
-    s, s2 = model.state(), model.state()
+    s, s2 = initial_state(model), initial_state(model)
     hist = []
     for _ in range(steps):
         integ.step(s, s2)
         s, s2 = s2, s
-        inertia = body_inertia_world(model, s)
+        rot = s.body_rotation
+        inertia = rot @ np.diag([1e-5, 2e-5, 3e-5]) @ rot.T  # B15
         w = s.body_omega
         hist.append((inertia @ w, 0.5 * w @ inertia @ w, s.body_rotation.T @ w))
     return hist
@@ -61,6 +63,18 @@ def _four_charges(q, radius):
     return np.array([[radius, 0, 0], [0, radius, 0], [-radius, 0, 0], [0, -radius, 0]]), q
 
 
+def _wrench(pos, q, v, w, rot, e, b):
+    """field_wrench of a massless body with charges q at pos (body frame), centre at 0."""
+    body = Body(True, SHAPE_SPHERE, 0.02, 0.0, np.eye(3), np.asarray(pos, float),
+                np.asarray(q, float), np.zeros(3))
+    fld = Field(np.asarray(e, float), np.asarray(b, float), 0, 0.0, np.zeros(3))
+    state = np.zeros((BODY_ROWS, 3))
+    state[BODY_V], state[BODY_W], state[BODY_R0:BODY_R0 + 3] = v, w, rot
+    f, m = np.zeros(3), np.zeros(3)
+    field_wrench(body, fld, 0.0, state, f, m)
+    return f, m
+
+
 def _direct(pos, q, v, w, e, b):
     """Eqs. 6.3–6.4 summed by hand."""
     force = np.zeros(3)
@@ -80,8 +94,7 @@ def test_charged_body_wrench_equals_direct_sums(seed):
     q = rng.normal(size=6)
     v, w, e, b = (rng.normal(size=3) * s for s in (100, 1e3, 1e3, 0.1))
     rot = np.linalg.qr(rng.normal(size=(3, 3)))[0]
-    f, m = np.zeros(3), np.zeros(3)
-    field_wrench(np.zeros(3), v, w, rot, pos, q, e, b, 0, 0.0, 0.0, np.zeros(3), f, m)
+    f, m = _wrench(pos, q, v, w, rot, e, b)
     fd, md = _direct(pos @ rot.T, q, v, w, e, b)
     np.testing.assert_allclose(f, fd, rtol=1e-12, atol=1e-12 * np.abs(fd).max())
     np.testing.assert_allclose(m, md, rtol=1e-12, atol=1e-12 * np.abs(md).max())
@@ -100,9 +113,7 @@ def test_four_charge_closed_forms(seed):
     pos, _ = _four_charges(q, radius)
     k = np.array([0, 0, 1.0])
     i, j = np.array([1.0, 0, 0]), np.array([0, 1.0, 0])
-    f, m = np.zeros(3), np.zeros(3)
-    field_wrench(np.zeros(3), v0 * k, w0 * k, np.eye(3), pos, q, e, b, 0, 0.0, 0.0,
-                 np.zeros(3), f, m)
+    f, m = _wrench(pos, q, v0 * k, w0 * k, np.eye(3), e, b)
     f_e = e * q.sum()  # 6.9
     f_lin = (-by * v0 * i + bx * v0 * j) * q.sum()  # 6.10
     f_rot = ((q1 - q3) * (bz * w0 * radius * i - bx * w0 * radius * k)
@@ -126,7 +137,7 @@ def test_free_charged_body_accelerates_in_E():
                        "solver.adaptive": False, "solver.dt_max": 1e-4})
     model = build_model(sc)
     integ = Integrator(model)
-    s, s2 = model.state(), model.state()
+    s, s2 = initial_state(model), initial_state(model)
     for _ in range(30):
         integ.step(s, s2)
         s, s2 = s2, s

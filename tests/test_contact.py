@@ -3,7 +3,19 @@
 import numpy as np
 import pytest
 
-from emfabric._kernels.contact import sphere_contact
+from emfabric._kernels.contact import node_contact
+from emfabric._kernels.records import (
+    BODY_R0,
+    BODY_ROWS,
+    BODY_V,
+    BODY_W,
+    BODY_X,
+    SHAPE_SPHERE,
+    Body,
+    Contact,
+    Nodes,
+    make_work,
+)
 from emfabric._kernels.step import _reaction_sums
 
 R = 0.02
@@ -14,16 +26,20 @@ def _contact(x_node, v_node, centre=(0, 0, 0), vel=(0, 0, 0), omega=(0, 0, 0), m
     x1 = np.array(x_node, dtype=float).reshape(3, 1).copy()
     v1 = np.array(v_node, dtype=float).reshape(3, 1).copy()
     x0 = x1.copy()
-    out = dict(node=np.zeros(1, np.int64), imp=np.zeros((3, 1)), arm=np.zeros((3, 1)),
-               proj=np.zeros((3, 1)))
-    nc = sphere_contact(np.zeros(1, np.int64), 1, 1, x0, x0, x1, v1, np.array([mass]),
-                        np.array(centre, float), np.array(vel, float), np.array(omega, float),
-                        R, mu_s, mu_d, np.zeros((2, 1)), out["node"], out["imp"], out["arm"],
-                        out["proj"])
+    nodes = Nodes(1, 1, x0.copy(), np.array([mass]), np.array([1 / mass]), np.zeros(1))
+    body = Body(True, SHAPE_SPHERE, R, 1.0, np.eye(3), np.zeros((0, 3)), np.zeros(0),
+                np.zeros(3))
+    state = np.zeros((BODY_ROWS, 3))
+    state[BODY_X], state[BODY_V], state[BODY_W] = centre, vel, omega
+    state[BODY_R0:BODY_R0 + 3] = np.eye(3)
+    work = make_work(1, 1)
+    work.cand[0] = 0
+    work.err_rows[:] = 0.0
+    nc = node_contact(nodes, body, Contact(mu_s, mu_d), state, 1, x0, x0, x1, v1, work)
     f = np.zeros(3)
     m = np.zeros(3)
-    _reaction_sums(nc, out["imp"], out["arm"], np.empty(1), f, m)
-    return nc, x1[:, 0], v1[:, 0], out["imp"][:, 0], f, m
+    _reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, f, m)
+    return nc, x1[:, 0], v1[:, 0], work.c_imp[:, 0].copy() if nc else np.zeros(3), f, m
 
 
 def test_inside_node_lands_on_surface():

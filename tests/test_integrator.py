@@ -8,6 +8,7 @@ import pytest
 from emfabric.builder import build_model
 from emfabric.integrator import DivergenceError, Integrator, step_factor
 from emfabric.runner import run
+from emfabric.state import initial_state, update_forces
 
 from conftest import fabric_only
 
@@ -21,13 +22,11 @@ def _prestretched(phi, dt, **kw):
         "solver.max_iterations": 400, **kw,
     })
     model = build_model(sc)
-    s = model.state()
+    s = initial_state(model)
     s.node_x[:2] *= 1.02
-    r2 = (model.node_x0[0] ** 2 + model.node_x0[1] ** 2) / 0.02**2
-    s.node_v[2] = 40.0 * np.exp(-r2) * (model.node_inv_mass > 0)
-    from emfabric.integrator import initial_forces
-
-    initial_forces(model, s)
+    r2 = (model.nodes.x0[0] ** 2 + model.nodes.x0[1] ** 2) / 0.02**2
+    s.node_v[2] = 40.0 * np.exp(-r2) * (model.nodes.inv_mass > 0)
+    update_forces(model, s)
     return model, s
 
 
@@ -131,17 +130,17 @@ def test_damage_is_monotone_and_rejected_steps_leave_it():
     assert float(res.history.min_damage[-1]) < 0.9
     model = res.model
     # replay: every accepted step's α equals the damage law at the accepted positions
-    s = model.state()
+    s = initial_state(model)
     integ = Integrator(model)
     s2 = s.copy()
     prev = s.seg_alpha.copy()
     uc, lam = 1.005, 30.0
-    a, b = model.seg_nodes.T
+    a, b = model.yarns.ends.T
     for _ in range(40):
         info = integ.step(s, s2)
         s, s2 = s2, s
         assert np.all(s.seg_alpha <= prev)
-        u = np.linalg.norm(s.node_x[:, b] - s.node_x[:, a], axis=0) / model.seg_rest_length
+        u = np.linalg.norm(s.node_x[:, b] - s.node_x[:, a], axis=0) / model.yarns.rest_length
         law = np.minimum(prev, np.where(u > uc, np.exp(-lam * (u - uc) / uc), 1.0))
         # α is committed from the last force evaluation of the accepted attempt (within TOL)
         assert np.allclose(s.seg_alpha, law, atol=1e-4)
@@ -162,7 +161,7 @@ def test_threaded_kernel_gives_identical_results():
     for threads in (False, True):
         integ = Integrator(model, threads=threads)
         assert (integ.threads is not None) == threads and (integ.rowbuf is None) == threads
-        s = model.state()
+        s = initial_state(model)
         s2 = s.copy()
         for _ in range(30):
             integ.step(s, s2)

@@ -30,7 +30,7 @@ def test_digest_changes_with_any_kernel_source(tmp_path):
     shutil.copytree(kernels.KERNEL_DIR, pkg, ignore=shutil.ignore_patterns("__pycache__"))
     before = kernels.source_digest(pkg)
     assert before == kernels.source_digest(kernels.KERNEL_DIR)
-    (pkg / "yarn.py").write_text((pkg / "yarn.py").read_text() + "\n# edited\n")
+    (pkg / "materials.py").write_text((pkg / "materials.py").read_text() + "\n# edited\n")
     assert kernels.source_digest(pkg) != before
 
 

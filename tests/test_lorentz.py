@@ -8,6 +8,7 @@ import pytest
 from emfabric.builder import build_model
 from emfabric.integrator import Integrator
 from emfabric.runner import run
+from emfabric.state import initial_state
 
 from conftest import fabric_only
 
@@ -25,7 +26,7 @@ def _free_sheet(n=2, **kw):
 def _march(sc, steps):
     model = build_model(sc)
     integ = Integrator(model)
-    s, s2 = model.state(), model.state()
+    s, s2 = initial_state(model), initial_state(model)
     for _ in range(steps):
         integ.step(s, s2)
         s, s2 = s2, s
@@ -39,7 +40,7 @@ def test_gyration_in_uniform_B(dt):
                         "fabric.charge_per_node": 1.0, "solver.dt_max": dt})
     steps = round(0.2 / dt)
     model, s = _march(sc, steps)
-    m, q, b = model.node_mass[0], 1.0, 0.01
+    m, q, b = model.nodes.mass[0], 1.0, 0.01
     wc = q * b / m  # 100 rad/s
     v = s.node_v[:, 0]
     # the midpoint (Cayley) update preserves |v| exactly
@@ -54,7 +55,7 @@ def test_gyration_in_uniform_B(dt):
     # the guiding centre stays put and the radius is v/ω_c: the discrete orbit is the exact
     # circle (chord Δt·|v̄| = 2 r sin(θ/2) with tan(θ/2) = ω_c Δt/2)
     centre = s.node_x[:2, 0] + np.array([v[1], -v[0]]) / wc
-    x0 = model.node_x0[:2, 0] + np.array([0.0, -3.0 / wc])
+    x0 = model.nodes.x0[:2, 0] + np.array([0.0, -3.0 / wc])
     assert np.allclose(centre, x0, rtol=0, atol=1e-12)
 
 
@@ -62,11 +63,11 @@ def test_uniform_E_gives_linear_momentum_growth():
     """A charged node in uniform E: p(t) = qEt exactly (constant force)."""
     sc = _free_sheet(**{"field.E": [2.0, -1.0, 0.5], "solver.dt_max": 1e-3})
     model, s = _march(sc, 50)
-    p = model.node_mass[0] * s.node_v[:, 0]
+    p = model.nodes.mass[0] * s.node_v[:, 0]
     assert np.allclose(p, np.array([2.0, -1.0, 0.5]) * 1.0 * s.t, rtol=1e-12, atol=0)
     # uniform acceleration: x − x0 = qE t² / (2m), exact for the trapezoidal rule
-    dx = s.node_x[:, 0] - model.node_x0[:, 0]
-    assert np.allclose(dx, np.array([2.0, -1.0, 0.5]) * s.t**2 / (2 * model.node_mass[0]),
+    dx = s.node_x[:, 0] - model.nodes.x0[:, 0]
+    assert np.allclose(dx, np.array([2.0, -1.0, 0.5]) * s.t**2 / (2 * model.nodes.mass[0]),
                        rtol=1e-10)
 
 
@@ -78,11 +79,11 @@ def test_free_fabric_rotates_rigidly_in_B():
                              "solver.tolerance": 1e-10})
     res = run(sc)
     ds = res.history
-    m_total = res.model.node_mass.sum()
+    m_total = res.model.nodes.mass.sum()
     vc = ds.fabric_momentum.values / m_total
     speed = np.linalg.norm(vc, axis=1)
     assert np.allclose(speed, 2.0, rtol=1e-10)
-    wc = 1.0 * 0.02 / res.model.node_mass[0]
+    wc = 1.0 * 0.02 / res.model.nodes.mass[0]
     turned = np.unwrap(np.arctan2(vc[:, 1], vc[:, 0]) - math.pi / 2)
     t = ds.time.values
     dt = 5e-4

@@ -8,8 +8,20 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from emfabric._kernels.nodes import ROWBUF_ROWS
+from emfabric._kernels.records import (
+    MATERIAL_FUNG,
+    SHAPE_SPHERE,
+    Body,
+    Contact,
+    Field,
+    Material,
+    Nodes,
+    Physics,
+    StateArrays,
+    Yarns,
+    make_work,
+)
 from emfabric._kernels.step import fabric_iterate
-from emfabric._kernels.yarn import MATERIAL_FUNG
 
 E_MOD, A0, L0 = 126e9, math.pi * 0.000185**2, 0.01
 
@@ -18,15 +30,23 @@ def _node_forces(x, nx, ny, coef, rest_w, rest_f, alpha, kind=0, fung_h=0.0, u_c
                  rate=0.0):
     """Yarn force on every node and the trial damage, from the production kernel (Δt = 0)."""
     n, s = nx * ny, ny * (nx - 1) + (ny - 1) * nx
-    inv_l02 = np.concatenate([np.full(ny * (nx - 1), 1 / rest_w**2),
-                              np.full((ny - 1) * nx, 1 / rest_f**2)])
-    fab = (np.ones(n), np.ones(n), np.zeros(n), coef, inv_l02)
-    fld = (np.zeros(3), np.zeros(3), 0, 0.0, np.zeros(3))
+    rest = np.concatenate([np.full(ny * (nx - 1), rest_w), np.full((ny - 1) * nx, rest_f)])
+    # the kernel reads only the stiffness 𝔼A0/L0 (coef) of the yarn record
+    yarns = Yarns(np.zeros((s, 2), np.int64), rest, 1 / rest**2, coef, coef * rest / A0, A0)
+    phys = Physics(
+        Nodes(nx, ny, x.copy(), np.ones(n), np.ones(n), np.zeros(n)),
+        yarns,
+        Material(kind, fung_h, u_crit, rate, 0.5),
+        Field(np.zeros(3), np.zeros(3), 0, 0.0, np.zeros(3)),
+        Body(False, SHAPE_SPHERE, 0.0, 1.0, np.eye(3), np.zeros((0, 3)), np.zeros(0),
+             np.zeros(3)),
+        Contact(0.0, 0.0),
+    )
+    start = StateArrays(x, np.zeros((3, n)), np.zeros((3, n)), alpha, np.zeros((8, 3)))
     f1, a_out = np.empty((3, n)), np.empty(s)
-    fabric_iterate((nx, ny), fab, (kind, fung_h, u_crit, rate), fld, x, x, np.zeros((3, n)),
-                   np.zeros((3, n)), alpha, np.ones(n, np.uint8), np.empty((3, n)),
-                   np.empty((3, n)), f1, a_out, np.empty((ROWBUF_ROWS, nx + 1)), None,
-                   (np.empty((2, ny)), np.empty(n), np.empty(n)), 1.0, 0.0)
+    fabric_iterate(phys, x, start, np.ones(n, np.uint8), np.empty((3, n)), np.empty((3, n)), f1,
+                   a_out, make_work(nx, ny), np.empty((ROWBUF_ROWS, nx + 1)), None, 0.0, 1.0,
+                   0.0)
     return f1, a_out
 
 

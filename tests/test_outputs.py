@@ -118,15 +118,20 @@ def test_cli_run_validate_scenarios(tmp_path):
 
 def test_history_record_matches_diagnostics(small_run):
     """The compiled history row agrees with the plain diagnostics of the final state."""
-    from emfabric.diagnostics import projectile_energy, projectile_momenta, tilt
     from emfabric.model import ENERGY_TERMS
 
     res, _ = small_run
     ds, st, m = res.history, res.state, res.model
     last = ds.isel(time=-1)
-    ke_t, ke_r = projectile_energy(m, st)
-    p, ang = projectile_momenta(m, st)
-    assert float(last.tilt) == pytest.approx(tilt(m, st), rel=1e-12, abs=1e-15)
+    # by hand: Ī = R I Rᵀ (B15), KE = M v²/2 + ω·Īω/2, L = x × Mv + Īω, tilt from eq. 5.2
+    rot, w = st.body_rotation, st.body_omega
+    inertia = rot @ m.body.inertia @ rot.T
+    ke_t, ke_r = 0.5 * m.body.mass * st.body_v @ st.body_v, 0.5 * w @ inertia @ w
+    p = m.body.mass * st.body_v
+    ang = np.cross(st.body_x, p) + inertia @ w
+    nose = rot @ m.body.nose
+    cos = nose @ m.body.nose / (np.linalg.norm(nose) * np.linalg.norm(m.body.nose))
+    assert float(last.tilt) == pytest.approx(np.arccos(min(cos, 1.0)), rel=1e-6, abs=1e-7)
     assert float(last.kinetic_energy_projectile) == pytest.approx(ke_t + ke_r, rel=1e-12)
     assert float(last.kinetic_energy_projectile_rotation) == pytest.approx(ke_r, rel=1e-12,
                                                                            abs=1e-18)
@@ -136,7 +141,7 @@ def test_history_record_matches_diagnostics(small_run):
     np.testing.assert_array_equal(last.projectile_velocity.values, st.body_v)
     for i, name in enumerate(ENERGY_TERMS):
         assert float(last[name]) == st.energy[i]
-    ke_f = 0.5 * float((m.node_mass * (st.node_v**2).sum(axis=0)).sum())
+    ke_f = 0.5 * float((m.nodes.mass * (st.node_v**2).sum(axis=0)).sum())
     assert float(last.kinetic_energy_fabric) == pytest.approx(ke_f, rel=1e-12)
 
 

@@ -6,6 +6,7 @@ import numpy as np
 
 from emfabric.builder import build_model
 from emfabric.integrator import Integrator
+from emfabric.state import initial_state, update_forces
 
 from conftest import fabric_only
 
@@ -16,12 +17,10 @@ def _chain(nx, v_split, dt=2e-8):
                         "fabric.edges": "free", "solver.adaptive": False, "solver.dt_max": dt,
                         "solver.tolerance": 1e-10})
     model = build_model(sc)
-    s = model.state()
+    s = initial_state(model)
     i = np.arange(model.node_count) % nx
     s.node_v[0] = np.where(i < nx // 2, -v_split, v_split)
-    from emfabric.integrator import initial_forces
-
-    initial_forces(model, s)
+    update_forces(model, s)
     return model, s
 
 
@@ -32,8 +31,8 @@ def test_tensile_pulse_speed():
     integ = Integrator(model)
     s2 = s.copy()
     h = 0.002
-    k = model.seg_modulus[0] * model.yarn_area / h
-    c = h * math.sqrt(k / model.node_mass[0])
+    k = model.yarns.modulus[0] * model.yarns.area / h
+    c = h * math.sqrt(k / model.nodes.mass[0])
     arrival = {}
     watch = [nx // 2 - 1 - d for d in (10, 20, 30, 40)]
     t = 0.0
@@ -51,8 +50,8 @@ def test_tensile_pulse_speed():
     speed = -np.polyfit(times, cols * h, 1)[0]
     assert abs(speed - c) / c < 0.03, (speed, c)
     # the lumped speed is ≈ sqrt(𝔼/ρ)/√2 of the solid with density ρ = m/(A0 h) on each family
-    rho = model.node_mass[0] / (model.yarn_area * h)
-    assert math.isclose(c, math.sqrt(model.seg_modulus[0] / rho), rel_tol=1e-12)
+    rho = model.nodes.mass[0] / (model.yarns.area * h)
+    assert math.isclose(c, math.sqrt(model.yarns.modulus[0] / rho), rel_tol=1e-12)
 
 
 def test_compression_does_not_propagate():

@@ -4,13 +4,20 @@ from __future__ import annotations
 
 import numpy as np
 
-from emfabric.model import (
+from emfabric._kernels.records import (
     MATERIAL_FUNG,
     MATERIAL_KSV,
     REGION_HALF_SPACE,
     REGION_UNIFORM,
-    Model,
+    SHAPE_SPHERE,
+    Body,
+    Contact,
+    Field,
+    Material,
+    Nodes,
+    Yarns,
 )
+from emfabric.model import Model
 from emfabric.scenario import Scenario, ScenarioError
 
 
@@ -91,33 +98,41 @@ def build_model(scenario: Scenario) -> Model:
     fld = scenario.field
     return Model(
         scenario=scenario,
-        nx=nx,
-        ny=ny,
-        node_x0=node_x0,
-        node_mass=node_mass,
-        node_inv_mass=node_inv_mass,
-        node_charge=node_charge,
-        seg_nodes=seg_nodes,
-        seg_rest_length=seg_rest,
-        seg_modulus=seg_modulus,
-        yarn_area=area,
-        material_kind=MATERIAL_KSV if mat.model == "kirchhoff-saint-venant" else MATERIAL_FUNG,
-        fung_H=mat.H or 0.0,
-        critical_stretch=fab.damage.critical_stretch,
-        damage_rate=fab.damage.rate,
-        broken_below=fab.damage.broken_below,
-        field_E=np.asarray(fld.E, dtype=float),
-        field_B=np.asarray(fld.B, dtype=float),
-        field_region=REGION_UNIFORM if fld.region == "uniform" else REGION_HALF_SPACE,
-        field_z0=fld.z0,
-        gravity=np.asarray(fld.gravity, dtype=float),
-        has_body=has_body,
-        body_radius=radius,
-        body_mass=pr.mass,
-        body_inertia=inertia,
-        body_charge_pos=charge_pos,
-        body_charge=charge_q,
-        body_nose=radius * lead,
+        nodes=Nodes(nx, ny, node_x0, node_mass, node_inv_mass, node_charge),
+        yarns=Yarns(
+            ends=seg_nodes,
+            rest_length=seg_rest,
+            inv_rest2=1.0 / seg_rest**2,
+            stiffness=seg_modulus * area / seg_rest,
+            modulus=seg_modulus,
+            area=float(area),
+        ),
+        material=Material(
+            kind=MATERIAL_KSV if mat.model == "kirchhoff-saint-venant" else MATERIAL_FUNG,
+            fung_h=float(mat.H or 0.0),
+            critical_stretch=float(fab.damage.critical_stretch),
+            damage_rate=float(fab.damage.rate),
+            broken_below=float(fab.damage.broken_below),
+        ),
+        field=Field(
+            E=np.asarray(fld.E, dtype=float),
+            B=np.asarray(fld.B, dtype=float),
+            region=REGION_UNIFORM if fld.region == "uniform" else REGION_HALF_SPACE,
+            z0=float(fld.z0),
+            gravity=np.asarray(fld.gravity, dtype=float),
+        ),
+        body=Body(
+            active=has_body,
+            shape=SHAPE_SPHERE,
+            radius=float(radius),
+            mass=float(pr.mass),
+            inertia=inertia,
+            charge_pos=charge_pos,
+            charge=charge_q,
+            nose=radius * lead,
+        ),
+        contact=Contact(float(scenario.contact.static_friction),
+                        float(scenario.contact.dynamic_friction)),
         body_x0=body_x0,
         body_v0=body_v0,
         body_w0=np.asarray(pr.angular_velocity, dtype=float),

@@ -10,64 +10,11 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.console import Console
-from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
+from emfabric.cli_app import app, console, emit, error, out_console, show_messages
 from emfabric.scenario import ScenarioError, builtin_names, load_scenario, parse_override
-
-app = typer.Typer(
-    add_completion=False,
-    no_args_is_help=True,
-    help="Simulate a rigid projectile striking electromagnetically sensitive fabric.",
-)
-console = Console(stderr=True)
-"""Messages, progress and the summary table: stderr."""
-out_console = Console()
-"""Tables meant for reading on stdout (`scenarios`); machine-readable output uses emit()."""
-
-
-def error(message: str) -> None:
-    """An error line on stderr: user text is never read as console markup, and long lines
-    are not wrapped (a piped message stays one line)."""
-    console.print("[bold red]error:[/] " + escape(str(message)), highlight=False,
-                  soft_wrap=True)
-
-
-def emit(text: str) -> None:
-    """Machine-readable output (JSON, file paths, TOML) on stdout, exactly as given."""
-    sys.stdout.write(text if text.endswith("\n") else text + "\n")
-    sys.stdout.flush()
-
-
-def _version(value: bool) -> None:
-    if value:
-        from emfabric import __version__
-
-        emit(f"emfabric {__version__}")
-        raise typer.Exit()
-
-
-@app.callback()
-def _main(
-    version: Annotated[bool, typer.Option(
-        "--version", callback=_version, is_eager=True, help="Print the version and exit")] = False,
-) -> None:
-    """Simulate a rigid projectile striking electromagnetically sensitive fabric."""
-
-
-def show_messages() -> None:
-    """Send emfabric's log messages (compiling kernels, incomplete runs, ...) to stderr."""
-    import logging
-
-    from rich.logging import RichHandler
-
-    logger = logging.getLogger("emfabric")
-    if not any(isinstance(h, RichHandler) for h in logger.handlers):
-        logger.addHandler(RichHandler(console=console, show_time=False, show_path=False,
-                                      show_level=False, markup=False))
-    logger.setLevel(logging.INFO)
 
 
 def _load(scenario: str, overrides: list[str] | None):
@@ -85,8 +32,9 @@ def _sigterm_as_interrupt(*_args) -> None:
 
 @app.command()
 def run(
-    scenario: Annotated[str, typer.Argument(
-        help="TOML file or built-in scenario name (see `emfabric scenarios`)")] = "paper-field",
+    scenario: Annotated[str | None, typer.Argument(
+        help="TOML file or built-in scenario name (see `emfabric scenarios`); default "
+             "paper-field")] = None,
     out: Annotated[Path | None, typer.Option(
         "--out", "-o", help="Output folder (default: runs/<scenario name>)")] = None,
     set_: Annotated[list[str] | None, typer.Option(
@@ -95,13 +43,36 @@ def run(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar")] = False,
     json_summary: Annotated[bool, typer.Option(
         "--json", help="Print the summary as JSON on stdout")] = False,
+    resume: Annotated[Path | None, typer.Option(
+        "--resume", help="Continue the run whose checkpoint is in this folder")] = None,
 ) -> None:
-    """Run a scenario; write history.nc, snapshots and ParaView files into the output folder."""
+    """Run a scenario; write history.nc, snapshots, ParaView files and a checkpoint into the output folder as the run goes (--resume DIR continues a stopped run)."""  # noqa: E501
+    from emfabric.io.checkpoint import CHECKPOINT, CheckpointError, read_checkpoint
+    from emfabric.runner import resume as resume_run
     from emfabric.runner import run as run_scenario
 
-    sc = _load(scenario, set_)
+    if resume is not None:
+        if out is not None and out.resolve() != resume.resolve():
+            error(f"--out {out} and --resume {resume} name different folders; a resumed run "
+                  f"writes into the folder it resumes")
+            raise typer.Exit(2)
+        given = _load(scenario, set_) if scenario is not None or set_ else None
+        try:
+            sc = read_checkpoint(resume / CHECKPOINT)[0]
+        except CheckpointError as err:
+            error(str(err))
+            raise typer.Exit(2) from None
+        out_dir = resume
+
+        def start(progress_fn):
+            return resume_run(resume, given, progress=progress_fn)
+    else:
+        sc = _load(scenario or "paper-field", set_)
+        out_dir = out if out is not None else Path("runs") / sc.name
+
+        def start(progress_fn):
+            return run_scenario(sc, out_dir, progress=progress_fn)
     show_messages()
-    out_dir = out if out is not None else Path("runs") / sc.name
     signal.signal(signal.SIGTERM, _sigterm_as_interrupt)
     t_end = sc.solver.end_time
     result = None
@@ -130,13 +101,18 @@ def run(
                        k=info.iterations, rate=rate)
 
         try:
-            result = run_scenario(sc, out_dir, progress=None if quiet else progress)
+            result = start(None if quiet else progress)
             elapsed = max(time.perf_counter() - wall0, 1e-9)
             bar.update(task, completed=t_end * 1e6, t=result.state.t * 1e6,
                        rate=result.state.t * 1e6 / elapsed * 60.0)
         except KeyboardInterrupt as exc:
             result = getattr(exc, "result", None)
-            console.print("[yellow]interrupted[/]: the history written so far is marked partial")
+            console.print("[yellow]interrupted[/]: the history written so far is marked partial;"
+                          f" continue with `emfabric run --resume {out_dir}`", markup=True,
+                          highlight=False)
+        except CheckpointError as exc:
+            error(str(exc))
+            raise typer.Exit(2) from None
         except Exception as exc:  # DivergenceError and friends
             result = getattr(exc, "result", None)
             error(str(exc))
@@ -217,4 +193,4 @@ def main() -> None:  # pragma: no cover - console entry
         sys.exit(2)
 
 
-from emfabric import cli_plot  # noqa: E402,F401  (registers `plot` and `animate`)
+from emfabric import cli_plot  # noqa: E402,F401  (registers `plot` and `animate` after these)

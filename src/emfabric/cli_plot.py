@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from emfabric.cli import app, emit, error, show_messages
+from emfabric.cli_app import app, emit, error, show_messages
 
 
 def _missing(err: FileNotFoundError) -> typer.Exit:

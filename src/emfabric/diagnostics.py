@@ -1,60 +1,134 @@
-"""Diagnostics as pure functions of (Model, State): tilt, energies, momenta, damage statistics."""
+"""Diagnostics of a State: the history record, the fabric's summary, and the run's stop rule.
+
+Physics lives in the kernels (emfabric._kernels.diagnostics: one pass over the fabric, then the
+record); this module names what they return. The recorder (emfabric.io.history) stores rows this
+module fills; it computes nothing.
+"""
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
 from emfabric._kernels import diagnostics as _k
+from emfabric._kernels.vec3 import tilt_angle
 from emfabric.model import Model, State
 
+# the history record: name -> (width, units, long name); width 3 means a (time, xyz) variable;
+# the column order of emfabric._kernels.diagnostics.history_row (column 0 is time)
+RECORD: dict[str, tuple[int, str, str]] = {
+    "dt": (1, "s", "accepted time step"),
+    "iterations": (1, "1", "fixed-point iterations of the accepted step"),
+    "error": (1, "1", "normalised iteration error at acceptance (eq. 3.10 step 5a)"),
+    "rejected_steps": (1, "1", "rejected attempts so far (cumulative)"),
+    "force_evaluations": (1, "1", "force evaluations so far (cumulative)"),
+    "projectile_position": (3, "m", "projectile centre of mass"),
+    "projectile_velocity": (3, "m s-1", "projectile centre-of-mass velocity"),
+    "angular_velocity": (3, "rad s-1", "projectile angular velocity (inertial frame)"),
+    "projectile_nose": (3, "m", "nose marker relative to the centre of mass"),
+    "tilt": (1, "rad", "tilt angle of the nose marker (eq. 5.2)"),
+    "contact_nodes": (1, "1", "fabric nodes in contact"),
+    "max_deflection": (1, "m", "largest out-of-plane node displacement"),
+    "max_stretch": (1, "1", "largest yarn stretch U = L/L0"),
+    "fabric_momentum": (3, "kg m s-1", "linear momentum of the fabric"),
+    "fabric_angular_momentum": (3, "kg m2 s-1", "angular momentum of the fabric about the origin"),
+    "projectile_momentum": (3, "kg m s-1", "linear momentum of the projectile"),
+    "projectile_angular_momentum": (3, "kg m2 s-1",
+                                    "angular momentum of the projectile about the origin"),
+    "kinetic_energy_projectile": (1, "J", "projectile kinetic energy (translation + rotation)"),
+    "kinetic_energy_projectile_rotation": (1, "J", "projectile rotational kinetic energy"),
+    "kinetic_energy_fabric": (1, "J", "fabric kinetic energy"),
+    "strain_energy": (1, "J", "stored yarn energy (damaged)"),
+    "broken_yarns": (1, "1", "yarns with damage α below fabric.damage.broken_below"),
+    "min_damage": (1, "1", "smallest yarn damage variable α (1 intact)"),
+    "work_field": (1, "J", "work of the electric field on fabric and projectile (cumulative)"),
+    "work_gravity": (1, "J", "work of gravity (cumulative)"),
+    "dissipation_friction": (1, "J", "energy dissipated by friction impulses (cumulative)"),
+    "dissipation_contact": (1, "J", "energy dissipated by normal contact impulses (cumulative)"),
+    "dissipation_projection": (1, "J", "work lost in contact position projections (cumulative)"),
+    "dissipation_damage": (1, "J", "energy released by yarn damage (cumulative)"),
+    "energy_balance_error": (1, "J", "kinetic + strain + dissipated − work − initial energy"),
+}
+COLUMNS = 1 + sum(w for w, _u, _l in RECORD.values())
+"""Columns of a history record (time first)."""
 
-def flight_direction(model: Model) -> np.ndarray:
-    """Unit vector of the projectile's initial velocity (−z if it starts at rest)."""
-    v = model.body_v0
-    speed = float(np.linalg.norm(v))
-    return v / speed if speed > 0 else np.array([0.0, 0.0, -1.0])
+
+class FabricDiagnostics(NamedTuple):
+    """The fabric's state in a few numbers (the kernel's order)."""
+
+    kinetic_energy: float
+    """[J]"""
+    momentum_x: float
+    momentum_y: float
+    momentum_z: float
+    angular_momentum_x: float
+    angular_momentum_y: float
+    angular_momentum_z: float
+    max_deflection: float
+    """Largest |z − z_ref| [m]."""
+    max_stretch: float
+    strain_energy: float
+    """[J]"""
+    broken_yarns: float
+    min_damage: float
+    ahead_min: float
+    """Smallest position of a node along the flight direction, relative to the body centre [m]."""
+    ahead_max: float
+    approach_max: float
+    """Fastest node speed against the flight direction [m/s]."""
+    recede_max: float
+    """Fastest node speed along the flight direction [m/s]."""
+
+
+def _fabric(model: Model, state: State) -> np.ndarray:
+    out = np.empty(_k.COUNT)
+    centre = state.body_x if model.has_body else np.zeros(3)
+    _k.fabric_diagnostics(model.physics, state.node_x, state.node_v, state.seg_alpha, centre,
+                          model.flight_direction, out)
+    return out
+
+
+def fabric(model: Model, state: State) -> FabricDiagnostics:
+    """Energy, momenta, deflection, stretch, damage and extent of the fabric in one pass."""
+    return FabricDiagnostics._make(_fabric(model, state).tolist())
+
+
+def _record(model: Model, state: State, row: np.ndarray,
+            e_initial: float) -> tuple[FabricDiagnostics, float]:
+    out = _fabric(model, state)
+    e0 = _k.history_row(state.t, state.last_dt, state.iterations, state.error, state.rejected,
+                        state.evaluations, state.contact_count, state.body, model.body, out,
+                        state.energy, e_initial, row)
+    return FabricDiagnostics._make(out.tolist()), float(e0)
+
+
+def measure(model: Model, state: State, row: np.ndarray) -> FabricDiagnostics:
+    """Fill `row` with the history record of `state` (the order of RECORD) and return the fabric
+    diagnostics it was made from."""
+    return _record(model, state, row, state.energy_initial)[0]
+
+
+def total_energy(model: Model, state: State) -> float:
+    """Kinetic + strain energy + dissipated − work so far [J] (the energy balance's total)."""
+    return _record(model, state, np.empty(COLUMNS), math.nan)[1]
 
 
 def tilt(model: Model, state: State) -> float:
     """Tilt angle Θ of eq. 5.2 [rad]: angle between the nose marker now and at t = 0."""
-    now = state.body_rotation @ model.body_nose
-    ref = model.body_nose
-    # atan2 form of arccos(a·b/|a||b|): accurate at small angles
-    return math.atan2(float(np.linalg.norm(np.cross(now, ref))), float(np.dot(now, ref)))
+    return float(tilt_angle(state.body_rotation, model.body.nose))
 
 
-def body_inertia_world(model: Model, state: State) -> np.ndarray:
-    """Inertia tensor about the centre of mass in the inertial frame [kg m²] (B15)."""
-    rot = state.body_rotation
-    return rot @ model.body_inertia @ rot.T
-
-
-def projectile_energy(model: Model, state: State) -> tuple[float, float]:
-    """Translational and rotational kinetic energy of the body [J]."""
-    if not model.has_body:
-        return 0.0, 0.0
-    v, w = state.body_v, state.body_omega
-    rot = 0.5 * float(w @ body_inertia_world(model, state) @ w)
-    return 0.5 * model.body_mass * float(v @ v), rot
-
-
-def projectile_momenta(model: Model, state: State) -> tuple[np.ndarray, np.ndarray]:
-    """Linear momentum and angular momentum about the origin of the body."""
-    if not model.has_body:
-        return np.zeros(3), np.zeros(3)
-    p = model.body_mass * state.body_v
-    h = body_inertia_world(model, state) @ state.body_omega
-    return p, np.cross(state.body_x, p) + h
-
-
-def fabric_diagnostics(model: Model, state: State, coef: np.ndarray) -> np.ndarray:
-    """Packed fabric diagnostics (see emfabric._kernels.diagnostics for the layout)."""
-    out = np.empty(_k.COUNT)
-    centre = state.body_x if model.has_body else np.zeros(3)
-    _k.fabric_diagnostics(state.node_x, state.node_v, model.node_x0, model.node_mass, model.nx,
-                          model.ny, state.seg_alpha, coef, model.seg_rest_length,
-                          model.material_kind, model.fung_H, model.broken_below, centre,
-                          flight_direction(model), out)
-    return out
+def left_for_good(model: Model, state: State, fab: FabricDiagnostics) -> str | None:
+    """'rebound' or 'perforation' once no node can reach the projectile any more (the run's
+    stop rule), else None."""
+    if not model.has_body or state.contact_count > 0:
+        return None
+    vb = float(state.body_v @ model.flight_direction)
+    clear = 1.05 * model.body.radius
+    if vb < 0 and fab.ahead_min > clear and fab.approach_max < -vb:
+        return "rebound"
+    if vb > 0 and fab.ahead_max < -clear and fab.recede_max < vb:
+        return "perforation"
+    return None

@@ -14,14 +14,9 @@ import numba
 import numpy as np
 
 from emfabric._kernels import is_compiled, mark_compiled
-from emfabric._kernels.body import field_wrench
 from emfabric._kernels.energy import step_energy
-from emfabric._kernels.nodes import (
-    ROWBUF_ROWS,
-    ROWS_PER_BLOCK,
-    fused_iterate,
-    fused_iterate_threads,
-)
+from emfabric._kernels.nodes import ROWBUF_ROWS, ROWS_PER_BLOCK
+from emfabric._kernels.records import Solver, make_work
 from emfabric._kernels.step import (
     CONTACT_MISSED,
     CONVERGED,
@@ -29,7 +24,7 @@ from emfabric._kernels.step import (
     NOT_FINITE,
     attempt_step,
 )
-from emfabric.model import BODY_F, BODY_M, BODY_R0, BODY_V, BODY_W, BODY_X, Model, State
+from emfabric.model import Model, State
 
 
 class DivergenceError(RuntimeError):
@@ -78,35 +73,16 @@ class Integrator:
         """threads: use the row-block threaded kernel (default: for sheets of at least
         THREADS_FROM_NODES nodes when Numba has more than one thread)."""
         self.model = model
-        m = model
-        n = m.node_count
-        sc = m.scenario
-        coef = m.seg_modulus * m.yarn_area / m.seg_rest_length
-        self.coef = coef
-        self.grid = (m.nx, m.ny)
-        self.fab = (m.node_mass, m.node_inv_mass, m.node_charge, coef,
-                    1.0 / m.seg_rest_length**2)
-        self.mat = (m.material_kind, m.fung_H, m.critical_stretch, m.damage_rate)
-        self.fld = (m.field_E, m.field_B, m.field_region, m.field_z0, m.gravity)
-        self.body = (m.has_body, m.body_radius, m.body_mass, m.body_inertia, m.body_charge_pos,
-                     m.body_charge, sc.contact.static_friction, sc.contact.dynamic_friction)
+        self.physics = model.physics
+        sc = model.scenario
+        n = model.node_count
         # threads pay off on large sheets only; block size fixed, so results never depend on them
         self._use_threads(threads if threads is not None else (
             n >= THREADS_FROM_NODES and numba.config.NUMBA_NUM_THREADS > 1))
         self._deferred = False  # serial until the threaded kernel is compiled
         self._background: threading.Thread | None = None
         self._background_ok = False
-        self.work = (
-            np.empty((3, n)),  # second iterate buffer
-            (np.empty((2, m.ny)), np.empty(n), np.empty(n)),  # error sums: per row, per node
-            np.empty(n, dtype=np.int64),  # contact candidates
-            np.zeros(n, dtype=np.uint8),  # candidate flags
-            np.empty(n, dtype=np.int64),  # contact nodes
-            np.empty((3, n)),  # contact impulses
-            np.empty((3, n)),  # contact arms
-            np.empty((3, n)),  # projection displacements
-            np.empty(n),  # summation buffer
-        )
+        self.work = make_work(model.nx, model.ny)
         solver = sc.solver
         # None for the plain fixed point: the step kernel is then compiled without Anderson
         self.accel = None
@@ -117,6 +93,7 @@ class Integrator:
         self.phi = solver.phi
         self.tol = solver.tolerance
         self.k_target = solver.target_iterations if solver.adaptive else solver.max_iterations
+        self.solver = Solver(float(solver.phi), float(solver.tolerance), int(self.k_target))
         self.p = solver.exponent
         self.safety = solver.safety
         self.adaptive = solver.adaptive
@@ -187,14 +164,11 @@ class Integrator:
                 mark_compiled(self.variant(True))
 
     def _args(self, s_in: State, s_out: State, dt: float, rowbuf, threads) -> tuple:
-        sin = (s_in.node_x, s_in.node_v, s_in.node_f, s_in.seg_alpha, s_in.body)
-        sout = (s_out.node_x, s_out.node_v, s_out.node_f, s_out.seg_alpha, s_out.body)
-        return (self.grid, self.fab, self.mat, self.fld, self.body, sin, sout, self.work, rowbuf,
-                threads, self.phi, dt, self.tol, self.k_target, self.accel)
+        return (self.physics, self.solver, s_in.arrays, s_out.arrays, self.work, rowbuf, threads,
+                s_in.t, dt, self.accel)
 
     def step(self, s_in: State, s_out: State, *, dt_limit: float = math.inf) -> StepInfo:
         """Advance s_in by one accepted step into s_out; s_in is left untouched."""
-        m = self.model
         bg = self._background
         if bg is not None and not bg.is_alive():
             # one try: on failure the serial kernel simply stays in use
@@ -237,18 +211,15 @@ class Integrator:
         else:
             s_out.dt = s_in.dt
         s_out.energy[:] = s_in.energy
-        xbuf, _e, _c, _f, c_node, c_imp, c_arm, c_proj, _b = self.work
-        step_energy(s_in.node_x, s_out.node_x, s_in.node_v, s_out.node_v, s_out.node_f,
-                    m.node_mass, m.node_inv_mass, m.node_charge, m.field_E, m.field_B,
-                    m.field_region, m.field_z0, m.gravity, self.phi, dt, nc, c_node, c_imp, c_arm,
-                    c_proj, s_in.body, s_out.body, m.body_charge_pos, m.body_charge,
-                    m.body_mass, m.seg_nodes, s_in.seg_alpha, s_out.seg_alpha, self.coef,
-                    m.seg_rest_length, m.material_kind, m.fung_H, s_out.energy)
+        step_energy(self.physics, s_in.arrays, s_out.arrays, nc, self.work, s_in.t, self.phi, dt,
+                    s_out.energy)
+        s_out.energy_initial = s_in.energy_initial
         s_out.steps = s_in.steps + 1
         s_out.rejected = s_in.rejected + rejected
         s_out.evaluations = s_in.evaluations + evaluations
         s_out.iterations = k
         s_out.error = err
+        s_out.last_dt = dt
         s_out.contact_count = nc
         return StepInfo(t=s_out.t, dt=dt, iterations=k, error=err, rejected=rejected,
                         evaluations=evaluations, contacts=nc)
@@ -266,32 +237,4 @@ class Integrator:
         )
 
 
-def initial_forces(model: Model, state: State) -> None:
-    """ψ(t) of the start state: yarn + Lorentz + gravity on the nodes, field and gravity on the
-    body (the first step's explicit part).
-
-    Calls the node kernel the step kernel uses (compiled with it, so nothing more to compile)
-    with Δt = 0 and φ = 1: the update returns v1 = v0 and ψ(x0, v0) in node_f."""
-    integ = Integrator(model)
-    integ.defer_threads()
-    scratch = state.copy()
-    m = model
-    mass, inv_mass, charge, coef, inv_l02 = integ.fab
-    kind, fung_h, u_crit, rate = integ.mat
-    efield, bfield, region, z0, grav = integ.fld
-    err_rows, err_num, err_den = integ.work[1]
-    kernel, rows = ((fused_iterate_threads, integ.threads) if integ.threaded
-                    else (fused_iterate, integ.rowbuf))
-    kernel(state.node_x, state.node_x, state.node_v, np.zeros_like(state.node_f),
-           state.seg_alpha, scratch.seg_alpha, m.nx, m.ny, coef, inv_l02, kind, fung_h, u_crit,
-           rate, mass, inv_mass, charge, 1.0, 0.0, efield, bfield, region, z0, grav,
-           np.ones(m.node_count, dtype=np.uint8), scratch.node_x, scratch.node_v, state.node_f,
-           err_rows, err_num, err_den, rows)
-    if m.has_body:
-        b = state.body
-        field_wrench(b[BODY_X], b[BODY_V], b[BODY_W], b[BODY_R0:BODY_R0 + 3], m.body_charge_pos,
-                     m.body_charge, efield, bfield, region, z0, m.body_mass, grav, b[BODY_F],
-                     b[BODY_M])
-
-
-__all__ = ["DivergenceError", "Integrator", "StepInfo", "initial_forces", "step_factor"]
+__all__ = ["DivergenceError", "Integrator", "StepInfo", "step_factor"]

@@ -13,14 +13,28 @@ import numpy as np
 import xarray as xr
 
 from emfabric._kernels import CACHE_DIR, CACHE_PERSISTENT, is_compiled, mark_compiled
-from emfabric._kernels import diagnostics as _k
 from emfabric.builder import build_model
-from emfabric.diagnostics import flight_direction
+from emfabric.diagnostics import left_for_good, measure
 from emfabric.integrator import DivergenceError, Integrator, StepInfo
-from emfabric.io.history import Recorder, run_attributes, write_history
-from emfabric.io.snapshots import Snapshots
+from emfabric.io.checkpoint import (
+    CHECKPOINT,
+    CheckpointError,
+    RunPosition,
+    check_matches,
+    read_checkpoint,
+    write_checkpoint,
+)
+from emfabric.io.history import (
+    Recorder,
+    append_history,
+    read_history_rows,
+    run_attributes,
+    write_history,
+)
+from emfabric.io.snapshots import Snapshots, snapshot_times, truncate_snapshots
 from emfabric.model import Model, State
 from emfabric.scenario import Scenario
+from emfabric.state import initial_state
 
 ProgressFn = Callable[[State, StepInfo], None]
 log = logging.getLogger(__name__)
@@ -41,20 +55,6 @@ class RunResult:
     summary: dict[str, float | int | str] = field(default_factory=dict)
 
 
-def _left_for_good(model: Model, state: State, diag: np.ndarray) -> str | None:
-    """'rebound' or 'perforation' once no node can reach the projectile any more."""
-    if not model.has_body or state.contact_count > 0:
-        return None
-    d = flight_direction(model)
-    vb = float(state.body_v @ d)
-    clear = 1.05 * model.body_radius
-    if vb < 0 and diag[_k.AHEAD_MIN] > clear and diag[_k.APPROACH_MAX] < -vb:
-        return "rebound"
-    if vb > 0 and diag[_k.AHEAD_MAX] < -clear and diag[_k.RECEDE_MAX] < vb:
-        return "perforation"
-    return None
-
-
 def run(
     scenario: Scenario,
     out_dir: str | Path | None = None,
@@ -62,16 +62,46 @@ def run(
     progress: ProgressFn | None = None,
     end_time: float | None = None,
 ) -> RunResult:
-    """Run a scenario to its end; write history.nc and snapshots into out_dir if given.
+    """Run a scenario to its end; write history.nc, snapshots and checkpoints into out_dir if
+    given, as the run goes.
 
-    Ctrl-C (KeyboardInterrupt) and divergence leave valid files marked partial/diverged; the
-    exception is re-raised after the files are written, with the result attached as `.result`.
+    Ctrl-C (KeyboardInterrupt) and divergence leave valid files marked partial/diverged and a
+    checkpoint; the exception is re-raised after the files are written, with the result
+    attached as `.result`.
     """
-    wall0 = time.perf_counter()
     model = build_model(scenario)
     out = Path(out_dir) if out_dir is not None else None
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
+    return _loop(model, None, None, out, progress, end_time)
+
+
+def resume(out_dir: str | Path, scenario: Scenario | None = None, *,
+           progress: ProgressFn | None = None) -> RunResult:
+    """Continue the run whose checkpoint is in out_dir. The history it writes is bitwise the one
+    an uninterrupted run writes. A scenario, if given, must equal the checkpoint's."""
+    out = Path(out_dir)
+    path = out / CHECKPOINT
+    stored, version, state, pos = read_checkpoint(path)
+    check_matches(scenario if scenario is not None else stored, version, stored, path)
+    model = build_model(stored)
+    if (state.node_x.shape != (3, model.node_count) or state.seg_alpha.shape
+            != (model.seg_count,)):
+        raise CheckpointError(f"{path}: its arrays do not fit the scenario's grid")
+    history = out / "history.nc"
+    try:
+        rows = read_history_rows(history, pos.history_rows)
+        times = snapshot_times(out / "snapshots.nc", pos.snapshots)
+    except (OSError, ValueError, KeyError) as err:
+        raise CheckpointError(f"{out}: the history or snapshots written with the checkpoint "
+                              f"cannot be read ({err})") from None
+    return _loop(model, state, (pos, rows, times), out, progress, None)
+
+
+def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
+          progress: ProgressFn | None, end_time: float | None) -> RunResult:
+    wall0 = time.perf_counter()
+    scenario = model.scenario
     integ = Integrator(model)
     # on a cold kernel cache, run serially and compile the threaded kernel beside the run
     deferred = integ.defer_threads()
@@ -79,36 +109,63 @@ def run(
         log.info("compiling kernels (first run only, about half a minute; cached in %s)" if
                  CACHE_PERSISTENT else "compiling kernels (no writable cache folder: "
                  "every run compiles; cached in %s for this process)", CACHE_DIR)
-    s_in = model.state()
-    s_out = s_in.copy()
-    recorder = Recorder(model, integ.coef)
-    snaps = Snapshots(model, out)
     t_end = end_time if end_time is not None else scenario.solver.end_time
     interval = scenario.output.snapshot_interval
-    recorder.record(s_in)
-    snaps.take(s_in)
-    next_snap = interval
-    next_checkpoint = wall0 + scenario.output.checkpoint_seconds
+    if resumed is None:
+        s_in = initial_state(model)
+        recorder = Recorder()
+        snaps = Snapshots(model, out)
+        measure(model, s_in, recorder.new_row())
+        snaps.take(s_in)
+        next_snap = interval
+        wall_before = 0.0
+        written = 0
+    else:
+        pos, rows, times = resumed
+        recorder = Recorder(rows)
+        snaps = Snapshots(model, out, times)
+        next_snap = pos.next_snapshot
+        wall_before = pos.wall_time
+        # records and snapshots written after the checkpoint are written again
+        write_history(recorder.to_dataset(run_attributes(model, "partial", "resumed",
+                                                         wall_before)), out / "history.nc")
+        truncate_snapshots(out / "snapshots.nc", pos.snapshots)
+        written = recorder.count
+        log.info("resuming at t = %.6g s (step %d)", s_in.t, s_in.steps)
+    s_out = s_in.copy()
     status, reason = "complete", "end_time"
     error: BaseException | None = None
 
-    def finish(status: str, reason: str) -> RunResult:
-        wall = time.perf_counter() - wall0
-        attrs = run_attributes(model, status, reason, wall)
-        ds = recorder.to_dataset(attrs)
-        if out is not None:
-            write_history(ds, out / "history.nc")
-            snaps.write(attrs)
-        res = RunResult(model, s_in, ds, status, reason, wall, out)
-        res.summary = summarize(res)
-        return res
+    def wall() -> float:
+        return wall_before + time.perf_counter() - wall0
 
+    def save(status: str, reason: str, history: xr.Dataset | None = None) -> None:
+        """Append the new records and snapshots (or write the whole `history` with its final
+        attributes), then write the checkpoint: in this order, so that the checkpoint only
+        counts what is on disk."""
+        nonlocal written
+        if out is None:
+            return
+        attrs = run_attributes(model, status, reason, wall())
+        if history is None:
+            written = append_history(out / "history.nc", recorder.rows[written:], attrs,
+                                     written)
+        else:
+            write_history(history, out / "history.nc")
+            written = recorder.count
+        snaps.flush(attrs)
+        write_checkpoint(out / CHECKPOINT, model, s_in,
+                         RunPosition(written, snaps.count, next_snap, wall()))
+
+    next_checkpoint = 0.0  # the first step is saved at once: a killed run always has files
+    first_step = True
     try:
         while s_in.t < t_end * (1 - 1e-12):
             info = integ.step(s_in, s_out, dt_limit=t_end - s_in.t)
             s_in, s_out = s_out, s_in
-            recorder.record(s_in, info.dt, info.iterations, info.error)
-            if s_in.steps == 1:
+            fab = measure(model, s_in, recorder.new_row())
+            if first_step:
+                first_step = False
                 mark_compiled(integ.variant())
                 if deferred:
                     integ.start_background_compile(s_in, s_out)
@@ -117,14 +174,12 @@ def run(
                 next_snap = interval * (math.floor(s_in.t / interval + 1e-9) + 1)
             if progress is not None:
                 progress(s_in, info)
-            left = _left_for_good(model, s_in, recorder.last_diag)
+            left = left_for_good(model, s_in, fab)
             if left is not None:
                 reason = left
                 break
             if out is not None and time.perf_counter() > next_checkpoint:
-                attrs = run_attributes(model, "partial", "running (checkpoint)",
-                                       time.perf_counter() - wall0)
-                write_history(recorder.to_dataset(attrs), out / "history.nc")
+                save("partial", "running (checkpoint)")
                 next_checkpoint = time.perf_counter() + scenario.output.checkpoint_seconds
     except KeyboardInterrupt as exc:
         status, reason, error = "partial", f"interrupted at t = {s_in.t:.6g} s", exc
@@ -132,7 +187,13 @@ def run(
         status, reason, error = "diverged", str(exc), exc
     if snaps.times[-1] != s_in.t:
         snaps.take(s_in)
-    result = finish(status, reason)
+    total = wall()
+    attrs = run_attributes(model, status, reason, total)
+    ds = recorder.to_dataset(attrs)
+    # the final attributes (status, end reason, wall time): one rewrite of history.nc per run
+    save(status, reason, ds)
+    result = RunResult(model, s_in, ds, status, reason, total, out)
+    result.summary = summarize(result)
     if integ.compiling_in_background and status != "partial":
         log.info("finishing the threaded kernel's compile for later runs (first run only)")
         integ.finish_background_compile()

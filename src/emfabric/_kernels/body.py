@@ -4,7 +4,9 @@
 import numpy as np
 from numba import njit
 
-from emfabric._kernels.nodes import in_field
+from emfabric._kernels.fields import field_at, lorentz_force
+from emfabric._kernels.records import BODY_F, BODY_M, BODY_R0, BODY_V, BODY_W, BODY_X
+from emfabric._kernels.shapes import bounding_radius
 from emfabric._kernels.vec3 import (
     cross,
     mat_mul,
@@ -16,29 +18,26 @@ from emfabric._kernels.vec3 import (
     world_inertia_times,
 )
 
-X, V, W, F, M, R0 = 0, 1, 2, 3, 4, 5
-
 
 @njit(cache=True)
-def field_wrench(centre, vel, omega, rot, charge_pos, charge_q, efield, bfield, region, z0,
-                 mass, grav, force, moment):
-    """Force and moment about the centre of mass of the body's charges (6.2–6.6) and gravity."""
+def field_wrench(body, fld, t, b_state, force, moment):
+    """Force and moment about the centre of mass of the body's charges (6.2–6.6) and gravity,
+    for the body state b_state (BODY_ROWS, 3) at time t."""
+    grav = fld.gravity
+    centre = b_state[BODY_X]
+    vel = b_state[BODY_V]
+    rot = b_state[BODY_R0:BODY_R0 + 3]
     for c in range(3):
-        force[c] = mass * grav[c]
+        force[c] = body.mass * grav[c]
         moment[c] = 0.0
-    w = vec(omega)
-    e = vec(efield)
-    b = vec(bfield)
-    for k in range(charge_q.shape[0]):
-        r = mat_vec(rot, charge_pos[k])
-        if not in_field(centre[2] + r[2], region, z0):
-            continue
-        q = charge_q[k]
+    w = vec(b_state[BODY_W])
+    for k in range(body.charge.shape[0]):
+        r = mat_vec(rot, body.charge_pos[k])
+        e, b = field_at(fld, (centre[0] + r[0], centre[1] + r[1], centre[2] + r[2]), t)
         # velocity of the charged point, eq. 6.1
         wr = cross(w, r)
         vp = (vel[0] + wr[0], vel[1] + wr[1], vel[2] + wr[2])
-        vb = cross(vp, b)
-        psi = (q * (e[0] + vb[0]), q * (e[1] + vb[1]), q * (e[2] + vb[2]))
+        psi = lorentz_force(body.charge[k], e, b, vp)
         rp = cross(r, psi)
         for c in range(3):
             force[c] += psi[c]
@@ -46,33 +45,35 @@ def field_wrench(centre, vel, omega, rot, charge_pos, charge_q, efield, bfield, 
 
 
 @njit(cache=True)
-def body_update(b_in, b_out, inertia_body, mass, charge_pos, charge_q, efield, bfield, region,
-                z0, grav, phi, dt, imp_force, imp_moment, tol, arm):
-    """One fixed-point update of the body from the previous iterate in b_out.
+def body_update(body, fld, b_in, b_out, t1, phi, dt, imp_force, imp_moment, tol):
+    """One fixed-point update of the body from the previous iterate in b_out, at time t1.
 
     Returns the body's error-measure numerator and denominator [m] (displacement units).
     """
-    x0 = b_in[X]
-    v0 = b_in[V]
-    w0 = b_in[W]
-    rot0 = b_in[R0:R0 + 3]
-    xk = vec(b_out[X])
-    wk = vec(b_out[W])
+    mass = body.mass
+    inertia_body = body.inertia
+    x0 = b_in[BODY_X]
+    v0 = b_in[BODY_V]
+    w0 = b_in[BODY_W]
+    rot0 = b_in[BODY_R0:BODY_R0 + 3]
+    xk = vec(b_out[BODY_X])
+    wk = vec(b_out[BODY_W])
     f1 = np.empty(3)
     m1 = np.empty(3)
-    field_wrench(b_out[X], b_out[V], b_out[W], b_out[R0:R0 + 3], charge_pos, charge_q, efield,
-                 bfield, region, z0, mass, grav, f1, m1)
+    field_wrench(body, fld, t1, b_out, f1, m1)
     # translation, eqs. 4.12–4.13, with the contact impulses taken whole
     v1 = np.empty(3)
     x1 = np.empty(3)
     for c in range(3):
-        v1[c] = v0[c] + dt / mass * (phi * f1[c] + (1.0 - phi) * b_in[F, c]) + imp_force[c] / mass
+        v1[c] = (v0[c] + dt / mass * (phi * f1[c] + (1.0 - phi) * b_in[BODY_F, c])
+                 + imp_force[c] / mass)
         x1[c] = x0[c] + dt * (phi * v1[c] + (1.0 - phi) * v0[c])
     # rotation, eqs. B3–B6 in the inertial frame: H1 = I0·ω0 + Δt·M(t+φΔt) + contact moments
     h0 = world_inertia_times(rot0, inertia_body, w0)
-    h1 = (h0[0] + dt * (phi * m1[0] + (1.0 - phi) * b_in[M, 0]) + imp_moment[0],
-          h0[1] + dt * (phi * m1[1] + (1.0 - phi) * b_in[M, 1]) + imp_moment[1],
-          h0[2] + dt * (phi * m1[2] + (1.0 - phi) * b_in[M, 2]) + imp_moment[2])
+    mo = b_in[BODY_M]
+    h1 = (h0[0] + dt * (phi * m1[0] + (1.0 - phi) * mo[0]) + imp_moment[0],
+          h0[1] + dt * (phi * m1[1] + (1.0 - phi) * mo[1]) + imp_moment[1],
+          h0[2] + dt * (phi * m1[2] + (1.0 - phi) * mo[2]) + imp_moment[2])
     w = wk
     inc = np.empty((3, 3))
     rot1 = np.empty((3, 3))
@@ -94,14 +95,15 @@ def body_update(b_in, b_out, inertia_body, mass, charge_pos, charge_q, efield, b
     rotation_increment(theta, inc)
     mat_mul(inc, rot0, rot1)
     for c in range(3):
-        b_out[X, c] = x1[c]
-        b_out[V, c] = v1[c]
-        b_out[W, c] = w[c]
-        b_out[F, c] = f1[c]
-        b_out[M, c] = m1[c]
+        b_out[BODY_X, c] = x1[c]
+        b_out[BODY_V, c] = v1[c]
+        b_out[BODY_W, c] = w[c]
+        b_out[BODY_F, c] = f1[c]
+        b_out[BODY_M, c] = m1[c]
         for d in range(3):
-            b_out[R0 + c, d] = rot1[c, d]
-    # error measure in displacement units: the centre plus a surface point at distance `arm`
+            b_out[BODY_R0 + c, d] = rot1[c, d]
+    # error measure in displacement units: the centre plus a surface point at the bounding radius
+    arm = bounding_radius(body)
     num = (norm((x1[0] - xk[0], x1[1] - xk[1], x1[2] - xk[2]))
            + arm * dt * phi * norm((w[0] - wk[0], w[1] - wk[1], w[2] - wk[2])))
     wm = (phi * w[0] + (1.0 - phi) * w0[0], phi * w[1] + (1.0 - phi) * w0[1],

@@ -5,8 +5,9 @@ import math
 import numpy as np
 from numba import njit
 
+from emfabric._kernels.materials import strain_energy_density, stretch_sq
+from emfabric._kernels.records import BODY_R0, BODY_V, BODY_W, BODY_X
 from emfabric._kernels.vec3 import cross, dot, mat_vec, tilt_angle, vec, world_inertia_times
-from emfabric._kernels.yarn import strain_energy_density
 
 # indices of the scalar results
 (KE, PX, PY, PZ, LX, LY, LZ, DEFLECTION, STRETCH, STRAIN, BROKEN, MIN_ALPHA, AHEAD_MIN,
@@ -15,34 +16,34 @@ COUNT = 16
 
 
 @njit(cache=True)
-def _yarn_stats(x, a0, count, step, s0, alpha, coef, rest2, kind, fung_h, broken_below, stats):
+def _yarn_stats(x, a0, count, step, s0, alpha, coef, rest2, il2, mat, stats):
     """Max U², strain energy, broken count and min α of `count` consecutive segments s0 + k
     joining a0 + k and a0 + k + step, merged into stats."""
     xx, xy, xz = x[0], x[1], x[2]
-    il2 = 1.0 / rest2
+    broken_below = mat.broken_below
     u2max, strain, broken, amin = stats
     for k in range(count):
         a = a0 + k
         b = a + step
         s = s0 + k
-        dx = xx[b] - xx[a]
-        dy = xy[b] - xy[a]
-        dz = xz[b] - xz[a]
-        u2 = (dx * dx + dy * dy + dz * dz) * il2
+        u2 = stretch_sq(xx[b] - xx[a], xy[b] - xy[a], xz[b] - xz[a], il2)
         u2max = max(u2max, u2)
         al = alpha[s]
-        strain += al * coef[s] * rest2 * strain_energy_density(u2, kind, fung_h)
+        strain += al * coef[s] * rest2 * strain_energy_density(u2, mat)
         broken += 1.0 if al < broken_below else 0.0
         amin = min(amin, al)
     return u2max, strain, broken, amin
 
 
 @njit(cache=True)
-def fabric_diagnostics(x, v, xref, mass, nx, ny, alpha, coef, rest, kind, fung_h,
-                       broken_below, centre, direction, out):
+def fabric_diagnostics(phys, x, v, alpha, centre, direction, out):
     """Kinetic energy, momentum, angular momentum (about the origin), max |Δz|, max stretch,
     strain energy, broken yarns, min α, and the nodes' extent/speed along the flight direction.
     """
+    nodes, yarns = phys.nodes, phys.yarns
+    nx, ny = nodes.nx, nodes.ny
+    xref, mass = nodes.x0, nodes.mass
+    coef, rest, il2 = yarns.stiffness, yarns.rest_length, yarns.inv_rest2
     ke = 0.0
     p = np.zeros(3)
     ang = np.zeros(3)
@@ -74,11 +75,12 @@ def fabric_diagnostics(x, v, xref, mass, nx, ny, alpha, coef, rest, kind, fung_h
     # rest lengths are uniform per family on the grid: warp rows, then the fill block
     nw = ny * (nx - 1)
     stats = (0.0, 0.0, 0.0, 1.0)
+    last = rest.shape[0] - 1
     for j in range(ny):
-        stats = _yarn_stats(x, j * nx, nx - 1, 1, j * (nx - 1), alpha, coef, rest[0] ** 2, kind,
-                            fung_h, broken_below, stats)
-    stats = _yarn_stats(x, 0, (ny - 1) * nx, nx, nw, alpha, coef, rest[rest.shape[0] - 1] ** 2,
-                        kind, fung_h, broken_below, stats)
+        stats = _yarn_stats(x, j * nx, nx - 1, 1, j * (nx - 1), alpha, coef, rest[0] ** 2,
+                            il2[0], phys.material, stats)
+    stats = _yarn_stats(x, 0, (ny - 1) * nx, nx, nw, alpha, coef, rest[last] ** 2, il2[last],
+                        phys.material, stats)
     u2max, strain, broken, amin = stats
     out[KE] = ke
     out[PX] = p[0]
@@ -99,16 +101,20 @@ def fabric_diagnostics(x, v, xref, mass, nx, ny, alpha, coef, rest, kind, fung_h
 
 
 @njit(cache=True)
-def history_row(t, dt, iterations, error, rejected, evaluations, contacts, body, has_body,
-                b_mass, inertia_body, nose_body, diag, energy, e_initial, row):
+def history_row(t, dt, iterations, error, rejected, evaluations, contacts, b_state, body, diag,
+                energy, e_initial, row):
     """Write one history record (the column order of emfabric.io.history.VARIABLES) into row.
 
     Returns the record's total energy (kinetic + strain + dissipated − work) [J].
     """
-    rot = body[5:8]
-    x = vec(body[0])
-    v = vec(body[1])
-    w = vec(body[2])
+    rot = b_state[BODY_R0:BODY_R0 + 3]
+    x = vec(b_state[BODY_X])
+    v = vec(b_state[BODY_V])
+    w = vec(b_state[BODY_W])
+    has_body = body.active
+    b_mass = body.mass
+    inertia_body = body.inertia
+    nose_body = body.nose
     nose = mat_vec(rot, nose_body)
     zero = (0.0, 0.0, 0.0)
     h = world_inertia_times(rot, inertia_body, w) if has_body else zero

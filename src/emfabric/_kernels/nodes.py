@@ -3,22 +3,20 @@
 v1 = v0 + Δt/m (φ ψ(t+Δt) + (1−φ) ψ(t)),  x1 = x0 + Δt (φ v1 + (1−φ) v0)  (eqs. 3.2, A12–A13),
 with the Lorentz force q(E + v1 × B) implicit in v1 (solved exactly per node) and the yarn force
 assembled as one difference per node and direction, (t_R − t_L) + (t_U − t_D), which keeps
-mirror-symmetric states exactly symmetric.
+mirror-symmetric states exactly symmetric. The material law is emfabric._kernels.materials, the
+field emfabric._kernels.fields.field_at (at each node's iterate position and at t + Δt).
+
+The kernels walk the regular weave row by row (the layout of emfabric._kernels.records): the
+tensions of a row never leave the cache.
 """
 
 import math
 
 from numba import njit, prange
 
-from emfabric._kernels.yarn import MATERIAL_FUNG, _stress_factor
-
-REGION_HALF_SPACE = 1
-
-
-@njit(cache=True, inline="always")
-def in_field(z, region, z0):
-    """Whether a point at height z feels the field (uniform, or the half-space z < z0)."""
-    return region != REGION_HALF_SPACE or z < z0
+from emfabric._kernels.fields import field_at, magnetic_force
+from emfabric._kernels.materials import damage, fung_stress, ksv_stress, stretch_sq
+from emfabric._kernels.records import MATERIAL_FUNG
 
 
 @njit(cache=True)
@@ -53,14 +51,14 @@ def _row_sums(err_num, err_den, nx, ny, err_rows):
 
 
 # rows of a block's row buffer, shape (ROWBUF_ROWS, nx + 1)
-_TW, _TU, _TD, _D, _U2, _AL, _F, _A, _UU, _AU, _INV, _Q, _H = (
-    0, 3, 6, 9, 12, 13, 14, 17, 20, 23, 24, 25, 26)
-ROWBUF_ROWS = 27
+_TW, _TU, _TD, _D, _U2, _AL, _F, _A, _UU, _AU, _INV, _E, _B, _H = (
+    0, 3, 6, 9, 12, 13, 14, 17, 20, 23, 24, 25, 28, 31)
+ROWBUF_ROWS = 32
 
 
 @njit(cache=True)
-def _tensions(xa_x, xa_y, xa_z, xb_x, xb_y, xb_z, count, il2, alpha_c, alpha_t, coef, kind,
-              fung_h, u_crit, rate, buf, out, write_alpha):
+def _tensions(xa_x, xa_y, xa_z, xb_x, xb_y, xb_z, count, il2, alpha_c, alpha_t, coef, mat, buf,
+              out, write_alpha):
     """Tension vectors of `count` segments joining a[i] to b[i] (row views) into out[:, :count].
 
     Split into short loops over few arrays so that the compiler vectorises them.
@@ -73,25 +71,21 @@ def _tensions(xa_x, xa_y, xa_z, xb_x, xb_y, xb_z, count, il2, alpha_c, alpha_t, 
         dy[i] = xb_y[i] - xa_y[i]
         dz[i] = xb_z[i] - xa_z[i]
     for i in range(count):
-        u2[i] = (dx[i] * dx[i] + dy[i] * dy[i] + dz[i] * dz[i]) * il2
-    # damage, eq. 2.6: irreversible, only past the critical stretch
-    uc2 = u_crit * u_crit
+        u2[i] = stretch_sq(dx[i], dy[i], dz[i], il2)
     for i in range(count):
-        alpha = alpha_c[i]
-        if u2[i] > uc2 and rate > 0.0:
-            alpha = min(alpha, math.exp(-rate * (math.sqrt(u2[i]) - u_crit) / u_crit))
-        al[i] = alpha
+        al[i] = damage(alpha_c[i], u2[i], mat)
     if write_alpha:
         for i in range(count):
             alpha_t[i] = al[i]
     tx, ty, tz = out[0], out[1], out[2]
-    if kind == MATERIAL_FUNG:
+    # one loop per law (stress_factor's two branches), so that each vectorises
+    if mat.kind == MATERIAL_FUNG:
+        fung_h = mat.fung_h
         for i in range(count):
-            al[i] = al[i] * coef[i] * _stress_factor(u2[i], kind, fung_h)
+            al[i] = al[i] * coef[i] * fung_stress(u2[i], fung_h)
     else:
-        # relaxed Kirchhoff–Saint-Venant: S/𝔼 = max(U² − 1, 0)/2
         for i in range(count):
-            al[i] = al[i] * coef[i] * (0.5 * max(u2[i] - 1.0, 0.0))
+            al[i] = al[i] * coef[i] * ksv_stress(u2[i])
     for i in range(count):
         tx[i] = al[i] * dx[i]
         ty[i] = al[i] * dy[i]
@@ -99,15 +93,19 @@ def _tensions(xa_x, xa_y, xa_z, xb_x, xb_y, xb_z, count, il2, alpha_c, alpha_t, 
 
 
 @njit(cache=True)
-def _row_block(j0, j1, prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind, fung_h,
-               u_crit, rate, mass, inv_mass, charge, phi, dt, efield, bfield, region, z0, grav,
+def _row_block(j0, j1, nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_t, t1, phi, dt,
                skip_err, x1, v1, f1, err_num, err_den, buf):
     """Rows j0 ≤ j < j1 of the fused iterate. The tensions of row j (warp) and between rows j and
     j + 1 (fill) live in the block's row buffer and are consumed at once; a block recomputes the
     fill tensions below its first row (writing no damage), so blocks are independent."""
+    nx, ny = nodes.nx, nodes.ny
+    mass, inv_mass, charge = nodes.mass, nodes.inv_mass, nodes.charge
+    coef = yarns.stiffness
+    grav = fld.gravity
     nw = ny * (nx - 1)
-    il_w = inv_l02[0]
-    il_f = inv_l02[inv_l02.shape[0] - 1]
+    # rest lengths are uniform per yarn family on the regular grid
+    il_w = yarns.inv_rest2[0]
+    il_f = yarns.inv_rest2[yarns.inv_rest2.shape[0] - 1]
     xx, xy, xz = prev[0], prev[1], prev[2]
     # padded warp row: twp[:, i + 1] is the tension of segment (i, i + 1), zeros at both ends
     twp = buf[_TW:_TW + 3]
@@ -120,7 +118,7 @@ def _row_block(j0, j1, prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02
         _tensions(xx[a:a + nx], xy[a:a + nx], xz[a:a + nx], xx[a + nx:a + 2 * nx],
                   xy[a + nx:a + 2 * nx], xz[a + nx:a + 2 * nx], nx, il_f,
                   alpha_c[nw + a:nw + a + nx], alpha_t[nw + a:nw + a + nx],
-                  coef[nw + a:nw + a + nx], kind, fung_h, u_crit, rate, buf, td, False)
+                  coef[nw + a:nw + a + nx], mat, buf, td, False)
     else:
         td[:] = 0.0
     f = buf[_F:_F + 3]
@@ -128,30 +126,31 @@ def _row_block(j0, j1, prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02
     uu = buf[_UU:_UU + 3]
     au = buf[_AU]
     inv = buf[_INV]
-    qq = buf[_Q]
+    ef = buf[_E:_E + 3]
+    bf = buf[_B:_B + 3]
     hh = buf[_H]
-    bx, by, bz = bfield[0], bfield[1], bfield[2]
     for j in range(j0, j1):
         nb = j * nx
         sb = j * (nx - 1)
         e = nb + nx
         _tensions(xx[nb:e - 1], xy[nb:e - 1], xz[nb:e - 1], xx[nb + 1:e], xy[nb + 1:e],
                   xz[nb + 1:e], nx - 1, il_w, alpha_c[sb:sb + nx - 1],
-                  alpha_t[sb:sb + nx - 1], coef[sb:sb + nx - 1], kind, fung_h, u_crit, rate,
-                  buf, twp[:, 1:], True)
+                  alpha_t[sb:sb + nx - 1], coef[sb:sb + nx - 1], mat, buf, twp[:, 1:], True)
         if j < ny - 1:
             _tensions(xx[nb:e], xy[nb:e], xz[nb:e], xx[e:e + nx], xy[e:e + nx], xz[e:e + nx],
                       nx, il_f, alpha_c[nw + nb:nw + e], alpha_t[nw + nb:nw + e],
-                      coef[nw + nb:nw + e], kind, fung_h, u_crit, rate, buf, tu, True)
+                      coef[nw + nb:nw + e], mat, buf, tu, True)
         else:
             tu[:, :nx] = 0.0
         m = mass[nb:e]
         im = inv_mass[nb:e]
-        zk = prev[2, nb:e]
         q = charge[nb:e]
+        px, py, pz = xx[nb:e], xy[nb:e], xz[nb:e]
         for i in range(nx):
-            # the field acts on the node where it is (uniform, or the half-space z < z0)
-            qq[i] = q[i] if in_field(zk[i], region, z0) else 0.0
+            # the field where the node is now (the iterate), at t + Δt
+            fe, fb = field_at(fld, (px[i], py[i], pz[i]), t1)
+            ef[0, i], ef[1, i], ef[2, i] = fe
+            bf[0, i], bf[1, i], bf[2, i] = fb
             hh[i] = dt * im[i]
         for c in range(3):
             fc = f[c]
@@ -159,11 +158,11 @@ def _row_block(j0, j1, prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02
             tuc = tu[c]
             tdc = td[c]
             g = grav[c]
-            ef = efield[c]
+            efc = ef[c]
             # yarn force, one difference per node and direction (mirror-exact assembly),
             # then the electric part of eq. 2.7 and gravity
             for i in range(nx):
-                fc[i] = ((tw[i + 1] - tw[i]) + (tuc[i] - tdc[i])) + (m[i] * g + qq[i] * ef)
+                fc[i] = ((tw[i + 1] - tw[i]) + (tuc[i] - tdc[i])) + (m[i] * g + q[i] * efc[i])
             ac = acc[c]
             v0c = v0[c, nb:e]
             f0c = f0[c, nb:e]
@@ -172,11 +171,12 @@ def _row_block(j0, j1, prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02
         # magnetic part implicit in v1: v1 − v1 × u = a with u = φΔt q B / m (solved exactly)
         ux, uy, uz = uu[0], uu[1], uu[2]
         ax, ay, az = acc[0], acc[1], acc[2]
+        bx, by, bz = bf[0], bf[1], bf[2]
         for i in range(nx):
-            beta = phi * hh[i] * qq[i]
-            ux[i] = beta * bx
-            uy[i] = beta * by
-            uz[i] = beta * bz
+            beta = phi * hh[i] * q[i]
+            ux[i] = beta * bx[i]
+            uy[i] = beta * by[i]
+            uz[i] = beta * bz[i]
         for i in range(nx):
             au[i] = ax[i] * ux[i] + ay[i] * uy[i] + az[i] * uz[i]
             inv[i] = 1.0 / (1.0 + ux[i] * ux[i] + uy[i] * uy[i] + uz[i] * uz[i])
@@ -188,9 +188,10 @@ def _row_block(j0, j1, prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02
         fx, fy, fz = f[0], f[1], f[2]
         gx, gy, gz = f1[0, nb:e], f1[1, nb:e], f1[2, nb:e]
         for i in range(nx):
-            gx[i] = fx[i] + qq[i] * (vy[i] * bz - vz[i] * by)
-            gy[i] = fy[i] + qq[i] * (vz[i] * bx - vx[i] * bz)
-            gz[i] = fz[i] + qq[i] * (vx[i] * by - vy[i] * bx)
+            fm = magnetic_force(q[i], (vx[i], vy[i], vz[i]), (bx[i], by[i], bz[i]))
+            gx[i] = fx[i] + fm[0]
+            gy[i] = fy[i] + fm[1]
+            gz[i] = fz[i] + fm[2]
         for c in range(3):
             x0c = x0[c, nb:e]
             v0c = v0[c, nb:e]
@@ -222,38 +223,38 @@ ROWS_PER_BLOCK = 16
 
 
 @njit(cache=True)
-def fused_iterate(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind, fung_h,
-                  u_crit, rate, mass, inv_mass, charge, phi, dt, efield, bfield, region, z0, grav,
-                  skip_err, x1, v1, f1, err_rows, err_num, err_den, rowbuf):
-    """Yarn tensions at `prev` and the φ-update of every node (serial).
+def fused_iterate(nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_t, x1, v1, f1,
+                  skip_err, err_rows, err_num, err_den, t1, phi, dt, rowbuf):
+    """Yarn tensions at the iterate `prev` and the φ-update of every node from the start state
+    (x0, v0, f0, alpha_c) into (x1, v1, f1), trial damage into alpha_t (serial).
 
-    Rest lengths are uniform per yarn family on the regular grid (inv_l02[0]: warp, inv_l02[-1]:
-    fill). rowbuf: (ROWBUF_ROWS, nx + 1). Walks the same row blocks as the threaded kernel, one
-    after the other: the same arithmetic, and one compiled specialisation of _row_block for both.
+    rowbuf: (ROWBUF_ROWS, nx + 1). Walks the same row blocks as the threaded kernel, one after
+    the other: the same arithmetic, and one compiled specialisation of _row_block for both.
     """
+    ny = nodes.ny
     blocks = (ny + ROWS_PER_BLOCK - 1) // ROWS_PER_BLOCK
     for b in range(blocks):
         j0 = b * ROWS_PER_BLOCK
         j1 = min(ny, j0 + ROWS_PER_BLOCK)
-        _row_block(j0, j1, prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind,
-                   fung_h, u_crit, rate, mass, inv_mass, charge, phi, dt, efield, bfield, region,
-                   z0, grav, skip_err, x1, v1, f1, err_num, err_den, rowbuf)
-    _row_sums(err_num, err_den, nx, ny, err_rows)
+        _row_block(j0, j1, nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_t, t1, phi,
+                   dt, skip_err, x1, v1, f1, err_num, err_den, rowbuf)
+    _row_sums(err_num, err_den, nodes.nx, ny, err_rows)
 
 
 @njit(cache=True, parallel=True)
-def fused_iterate_threads(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind,
-                          fung_h, u_crit, rate, mass, inv_mass, charge, phi, dt, efield, bfield,
-                          region, z0, grav, skip_err, x1, v1, f1, err_rows, err_num, err_den,
-                          rowbuf):
-    """fused_iterate over blocks of ROWS_PER_BLOCK rows in parallel threads. Every value is
-    computed by the same arithmetic as in the serial kernel, so results do not depend on the
-    number of threads."""
+def fused_iterate_threads(nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_t, x1, v1,
+                          f1, skip_err, err_rows, err_num, err_den, t1, phi, dt, rowbuf):
+    """fused_iterate over blocks of ROWS_PER_BLOCK rows in parallel threads; rowbuf (blocks,
+    ROWBUF_ROWS, nx + 1). Every value is computed by the same arithmetic as in the serial
+    kernel, so results do not depend on the number of threads.
+
+    The records are arguments of this function, not taken apart here: Numba's parallel loops
+    accept a named tuple only as a function argument."""
+    ny = nodes.ny
     blocks = (ny + ROWS_PER_BLOCK - 1) // ROWS_PER_BLOCK
     for b in prange(blocks):
         j0 = b * ROWS_PER_BLOCK
         j1 = min(ny, j0 + ROWS_PER_BLOCK)
-        _row_block(j0, j1, prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind,
-                   fung_h, u_crit, rate, mass, inv_mass, charge, phi, dt, efield, bfield, region,
-                   z0, grav, skip_err, x1, v1, f1, err_num, err_den, rowbuf[b])
-    _row_sums(err_num, err_den, nx, ny, err_rows)
+        _row_block(j0, j1, nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_t, t1, phi,
+                   dt, skip_err, x1, v1, f1, err_num, err_den, rowbuf[b])
+    _row_sums(err_num, err_den, nodes.nx, ny, err_rows)

@@ -13,8 +13,10 @@ from numba import njit
 
 from emfabric._kernels.anderson import anderson_mix
 from emfabric._kernels.body import body_update
-from emfabric._kernels.contact import find_candidates, sphere_contact
+from emfabric._kernels.contact import find_candidates, node_contact
 from emfabric._kernels.nodes import fused_iterate, fused_iterate_threads
+from emfabric._kernels.records import BODY_R0, BODY_V, BODY_W, BODY_X
+from emfabric._kernels.shapes import bounding_radius, is_inside
 from emfabric._kernels.sums import fsum
 from emfabric._kernels.vec3 import copy_into, norm
 
@@ -36,67 +38,64 @@ def _reaction_sums(nc, c_imp, c_arm, buf, imp_force, imp_moment):
 
 
 @njit(cache=True)
-def _nodes_inside(x, inv_mass, flag, centre, radius):
-    """Free nodes inside the sphere that were not contact candidates (must be none)."""
+def _nodes_inside(x, inv_mass, flag, body, b_state):
+    """Free nodes inside the body that were not contact candidates (must be none)."""
     count = 0
+    centre = b_state[BODY_X]
+    rot = b_state[BODY_R0:BODY_R0 + 3]
     for n in range(x.shape[1]):
         if flag[n] == 0 and inv_mass[n] > 0.0:
-            dx = x[0, n] - centre[0]
-            dy = x[1, n] - centre[1]
-            dz = x[2, n] - centre[2]
-            if dx * dx + dy * dy + dz * dz < radius * radius:
+            d = (x[0, n] - centre[0], x[1, n] - centre[1], x[2, n] - centre[2])
+            if is_inside(body, rot, d):
                 count += 1
     return count
 
 
 @njit(cache=True, inline="always")
-def fabric_iterate(grid, fab, mat, fld, prev, x0, v0, f0, alpha_c, skip_err, cur, v1, f1,
-                   alpha_t, rowbuf, threads, err, phi, dt):
+def fabric_iterate(phys, prev, sin, skip_err, cur, v1, f1, alpha_t, work, rowbuf, threads, t1,
+                   phi, dt):
     """One force evaluation + node update: yarn tensions and damage at the iterate `prev`, then
-    the φ-update of every node into (cur, v1, f1).
+    the φ-update of every node from the start state sin into (cur, v1, f1), trial damage into
+    alpha_t; the field is taken at time t1 = t + Δt.
 
     Exactly one of rowbuf, threads is an array, the other None: rowbuf (ROWBUF_ROWS, nx + 1)
-    runs the serial kernel, threads (blocks, ROWBUF_ROWS, nx + 1) the threaded one. err =
-    (per-row sums (2, ny), per-node scratch (node_count,), per-node scratch (node_count,)).
+    runs the serial kernel, threads (blocks, ROWBUF_ROWS, nx + 1) the threaded one.
 
     Numba drops a branch at compile time only on an argument typed None, hence the pair: only
     the kernel in use is compiled. Inlined (Numba IR) into the step kernel: one compiled level
     less (each level re-optimises and re-emits the machine code of everything below it, which
     is most of the first run's compile time)."""
-    err_rows, err_num, err_den = err
-    nx, ny = grid
-    mass, inv_mass, charge, coef, inv_l02 = fab
-    kind, fung_h, u_crit, rate = mat
-    efield, bfield, region, z0, grav = fld
     if rowbuf is None:
         if threads is not None:
-            fused_iterate_threads(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02,
-                                  kind, fung_h, u_crit, rate, mass, inv_mass, charge, phi, dt,
-                                  efield, bfield, region, z0, grav, skip_err, cur, v1, f1,
-                                  err_rows, err_num, err_den, threads)
+            fused_iterate_threads(phys.nodes, phys.yarns, phys.material, phys.field, prev,
+                                  sin.x, sin.v, sin.f, sin.alpha, alpha_t, cur, v1, f1, skip_err,
+                                  work.err_rows, work.err_num, work.err_den, t1, phi, dt,
+                                  threads)
     else:
-        fused_iterate(prev, x0, v0, f0, alpha_c, alpha_t, nx, ny, coef, inv_l02, kind, fung_h,
-                      u_crit, rate, mass, inv_mass, charge, phi, dt, efield, bfield, region, z0,
-                      grav, skip_err, cur, v1, f1, err_rows, err_num, err_den, rowbuf)
+        fused_iterate(phys.nodes, phys.yarns, phys.material, phys.field, prev, sin.x, sin.v,
+                      sin.f, sin.alpha, alpha_t, cur, v1, f1, skip_err, work.err_rows,
+                      work.err_num, work.err_den, t1, phi, dt, rowbuf)
 
 
 @njit(cache=True, nogil=True)
-def attempt_step(grid, fab, mat, fld, body, sin, sout, work, rowbuf, threads, phi, dt, tol,
-                 kmax, accel):
-    """Iterate the coupled step to ϖ_K ≤ tol within kmax iterations.
+def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
+    """Iterate the coupled step from time t to t + Δt to ϖ_K ≤ solver.tolerance within
+    solver.iteration_limit iterations (phys: a Physics record, sin/sout: StateArrays).
 
     Returns (status, K, ϖ_K, contact count). On CONVERGED, sout holds the state at t + Δt and
-    alpha_t the trial damage to commit; sin is never written.
+    sout.alpha the trial damage to commit; sin is never written.
     """
-    nx, ny = grid
-    mass, inv_mass, charge, coef, inv_l02 = fab
-    kind, fung_h, u_crit, rate = mat
-    efield, bfield, region, z0, grav = fld
-    has_body, radius, b_mass, b_inertia, q_pos, q_val, mu_s, mu_d = body
-    x0, v0, f0, alpha_c, b_in = sin
-    x1, v1, f1, alpha_t, b_out = sout
-    xbuf, err_work, cand, flag, c_node, c_imp, c_arm, c_proj, sum_buf = work
-    err_rows = err_work[0]
+    nodes = phys.nodes
+    body = phys.body
+    ny = nodes.ny
+    inv_mass = nodes.inv_mass
+    phi = solver.phi
+    tol = solver.tolerance
+    kmax = solver.iteration_limit
+    t1 = t + dt
+    x0, v0, b_in = sin.x, sin.v, sin.body
+    x1, v1, f1, alpha_t, b_out = sout.x, sout.v, sout.f, sout.alpha, sout.body
+    xbuf, flag, err_rows = work.xbuf, work.flag, work.err_rows
 
     # one pass over the start state: the fastest node (contact reach) and the size of the
     # coordinates (a displacement below their round-off is no motion: ϖ would be noise/noise)
@@ -107,11 +106,12 @@ def attempt_step(grid, fab, mat, fld, body, sin, sout, work, rowbuf, threads, ph
         still += abs(x0[0, n]) + abs(x0[1, n]) + abs(x0[2, n])
     still *= 1e-13
     ncand = 0
-    if has_body:
+    if body.active:
         # contact candidates: nodes that can reach the body within this step
-        speed = norm(b_in[1]) + radius * norm(b_in[2])
+        radius = bounding_radius(body)
+        speed = norm(b_in[BODY_V]) + radius * norm(b_in[BODY_W])
         reach = 1.05 * radius + 2.0 * dt * (speed + math.sqrt(vmax))
-        ncand = find_candidates(x0, inv_mass, b_in[0], reach, cand, flag)
+        ncand = find_candidates(x0, inv_mass, b_in[BODY_X], reach, work.cand, flag)
     else:
         flag[:] = 0
 
@@ -135,18 +135,15 @@ def attempt_step(grid, fab, mat, fld, body, sin, sout, work, rowbuf, threads, ph
         else:
             prev = xbuf if k % 2 == 1 else x1
             cur = x1 if k % 2 == 1 else xbuf
-        fabric_iterate(grid, fab, mat, fld, prev, x0, v0, f0, alpha_c, flag, cur, v1, f1,
-                       alpha_t, rowbuf, threads, err_work, phi, dt)
+        fabric_iterate(phys, prev, sin, flag, cur, v1, f1, alpha_t, work, rowbuf, threads, t1,
+                       phi, dt)
         num_b = 0.0
         den_b = 0.0
-        if has_body:
-            nc = sphere_contact(cand, ncand, nx, x0, prev, cur, v1, mass, b_out[0], b_out[1],
-                                b_out[2], radius, mu_s, mu_d, err_rows, c_node, c_imp, c_arm,
-                                c_proj)
-            _reaction_sums(nc, c_imp, c_arm, sum_buf, imp_force, imp_moment)
-            num_b, den_b = body_update(b_in, b_out, b_inertia, b_mass, q_pos, q_val, efield,
-                                       bfield, region, z0, grav, phi, dt, imp_force, imp_moment,
-                                       tol, radius)
+        if body.active:
+            nc = node_contact(nodes, body, phys.contact, b_out, ncand, x0, prev, cur, v1, work)
+            _reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, imp_force, imp_moment)
+            num_b, den_b = body_update(body, phys.field, b_in, b_out, t1, phi, dt, imp_force,
+                                       imp_moment, tol)
         # error measure, eq. 3.10 step 5a (fabric), and the same for the body
         num = 0.0
         den = 0.0
@@ -168,6 +165,6 @@ def attempt_step(grid, fab, mat, fld, body, sin, sout, work, rowbuf, threads, ph
         copy_into(x1, xbuf)
     if err > tol:
         return NOT_CONVERGED, k, err, nc
-    if has_body and _nodes_inside(x1, inv_mass, flag, b_out[0], radius) > 0:
+    if body.active and _nodes_inside(x1, inv_mass, flag, body, b_out) > 0:
         return CONTACT_MISSED, k, err, nc
     return CONVERGED, k, err, nc

@@ -1,5 +1,14 @@
 """netCDF conventions shared by history.nc and snapshots.nc (CF-1.8, checked with cfchecker).
 
+- history.nc and snapshots.nc are written as the run goes: created with the first records, then
+  appended along their unlimited dimension (`time`, `snapshot`). They use the classic netCDF
+  format with 64-bit offsets (netCDF-C, read by xarray, ncdump, ParaView, MATLAB, NCO like any
+  netCDF file) because appending a record there only writes the new data and then the record
+  count in the header: a process killed in the middle of an append leaves the file readable
+  with the records it had. An HDF5-based (netCDF-4) file being appended to can be left
+  unreadable by a kill. Integer variables are therefore 32-bit. Files written whole
+  (checkpoint.nc, study results) are netCDF-4, written to a temporary name and renamed.
+
 - `time` is simulated time in seconds from the start of the run, with no `standard_name`
   (CF's `time` standard name needs a reference date, which a simulation does not have).
 - Vector components run along the `xyz` dimension, labelled by a character coordinate
@@ -29,8 +38,44 @@ def xyz_coordinate() -> tuple:
     return ("xyz", np.array(["x", "y", "z"]), {"long_name": "Cartesian component"})
 
 
-def write_netcdf(ds: xr.Dataset, path: str | Path) -> None:
-    """Write the dataset as netCDF4, atomically, with `xyz` as a CF character label."""
+APPENDABLE = "NETCDF3_64BIT_OFFSET"
+
+
+def write_netcdf(ds: xr.Dataset, path: str | Path, *, unlimited: str | None = None) -> None:
+    """Write the dataset atomically, with `xyz` as a CF character label: netCDF-4, or the
+    appendable classic format with `unlimited` as the record dimension."""
     encoding = {"xyz": {"dtype": "S1"}} if "xyz" in ds.variables else {}
-    write_atomic(path, lambda tmp: ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4",
-                                               encoding=encoding))
+    if unlimited is None:
+        write_atomic(path, lambda tmp: ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4",
+                                                   encoding=encoding))
+    else:
+        write_atomic(path, lambda tmp: ds.to_netcdf(tmp, engine="netcdf4", format=APPENDABLE,
+                                                   encoding=encoding,
+                                                   unlimited_dims=[unlimited]))
+
+
+def append_records(path: str | Path, dim: str, records: dict[str, np.ndarray]) -> int:
+    """Append records (name -> array whose first axis runs along `dim`) to a file written by
+    write_netcdf(..., unlimited=dim); returns the new length of `dim`."""
+    import netCDF4
+
+    with netCDF4.Dataset(path, "a") as nc:
+        start = len(nc.dimensions[dim])
+        count = 0
+        for name, values in records.items():
+            count = values.shape[0]
+            nc.variables[name][start:start + count] = values
+        return start + count
+
+
+def read_records(path: str | Path, dim: str, count: int) -> dict[str, np.ndarray]:
+    """The first `count` records of every variable along `dim` (raw values)."""
+    import netCDF4
+
+    with netCDF4.Dataset(path, "r") as nc:
+        nc.set_auto_maskandscale(False)
+        if len(nc.dimensions[dim]) < count:
+            raise ValueError(f"{path} holds {len(nc.dimensions[dim])} records along {dim!r}, "
+                             f"expected at least {count}")
+        return {name: np.array(var[:count]) for name, var in nc.variables.items()
+                if var.dimensions[:1] == (dim,)}

@@ -14,42 +14,54 @@ import numpy as np
 import xarray as xr
 
 from emfabric.io.atomic import write_atomic
-from emfabric.io.netcdf import TIME_ATTRS, write_netcdf, xyz_coordinate
+from emfabric.io.netcdf import (
+    TIME_ATTRS,
+    append_records,
+    read_records,
+    write_netcdf,
+    xyz_coordinate,
+)
 from emfabric.model import Model, State
 
 
 class Snapshots:
-    """Holds the snapshots of one run in memory; writes them atomically on demand."""
+    """The snapshots of one run: each is written to vtk/*.vtu when taken; flush() appends the
+    ones taken since the last flush to snapshots.nc and rewrites the .pvd collections."""
 
-    def __init__(self, model: Model, out_dir: Path | None):
+    def __init__(self, model: Model, out_dir: Path | None, times: list[float] | None = None):
+        """times: the snapshots already on disk (a resumed run)."""
         self.model = model
         self.out_dir = out_dir
-        self.times: list[float] = []
-        self.x: list[np.ndarray] = []
-        self.v: list[np.ndarray] = []
-        self.alpha: list[np.ndarray] = []
-        self.body: list[np.ndarray] = []
-        self._sphere = _sphere_mesh(model.body_radius) if model.has_body else None
+        self.times: list[float] = list(times or [])
+        self.written = len(self.times)
+        self._pending: list[tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._sphere = _sphere_mesh(model.body.radius) if model.has_body else None
+
+    @property
+    def count(self) -> int:
+        return len(self.times)
 
     def take(self, state: State) -> None:
         self.times.append(state.t)
-        self.x.append(state.node_x.T.copy())
-        self.v.append(state.node_v.T.copy())
-        self.alpha.append(state.seg_alpha.copy())
-        self.body.append(state.body.copy())
-        if self.out_dir is not None:
-            self._write_vtk(len(self.times) - 1)
+        if self.out_dir is None:
+            return
+        snap = (state.t, state.node_x.T.copy(), state.node_v.T.copy(), state.seg_alpha.copy(),
+                state.body.copy())
+        self._pending.append(snap)
+        self._write_vtk(len(self.times) - 1, snap)
 
-    def to_dataset(self, attrs: dict[str, str]) -> xr.Dataset:
+    def _records(self, attrs: dict[str, str]) -> xr.Dataset:
         m = self.model
-        body = np.array(self.body).reshape(-1, 8, 3)
-        ds = xr.Dataset(
+        times = np.array([p[0] for p in self._pending])
+        x, v, alpha, body = (np.array([p[k] for p in self._pending]) for k in (1, 2, 3, 4))
+        body = body.reshape(-1, 8, 3)
+        return xr.Dataset(
             {
-                "node_position": (("snapshot", "node", "xyz"), np.array(self.x),
+                "node_position": (("snapshot", "node", "xyz"), x,
                                   {"units": "m", "long_name": "node position"}),
-                "node_velocity": (("snapshot", "node", "xyz"), np.array(self.v),
+                "node_velocity": (("snapshot", "node", "xyz"), v,
                                   {"units": "m s-1", "long_name": "node velocity"}),
-                "yarn_damage": (("snapshot", "segment"), np.array(self.alpha),
+                "yarn_damage": (("snapshot", "segment"), alpha,
                                 {"units": "1", "long_name": "yarn damage α (1 intact, 0 broken)"}),
                 "projectile_position": (("snapshot", "xyz"), body[:, 0],
                                         {"units": "m", "long_name": "projectile centre of mass"}),
@@ -62,53 +74,62 @@ class Snapshots:
                 "projectile_rotation": (("snapshot", "xyz", "body_axis"), body[:, 5:8],
                                         {"units": "1",
                                          "long_name": "rotation matrix body -> inertial frame"}),
-                "segment_nodes": (("segment", "end"), m.seg_nodes,
+                "segment_nodes": (("segment", "end"), m.yarns.ends,
                                   {"units": "1",
                                    "long_name": "node indices of each yarn segment"}),
-                "reference_position": (("node", "xyz"), m.node_x0.T,
+                "reference_position": (("node", "xyz"), m.nodes.x0.T,
                                        {"units": "m", "long_name": "node position at t = 0"}),
-                "projectile_nose_body": (("xyz",), m.body_nose,
+                "projectile_nose_body": (("xyz",), m.body.nose,
                                          {"units": "m", "long_name": "nose marker, body frame"}),
             },
             coords={
-                "time": ("snapshot", np.array(self.times), TIME_ATTRS),
+                "time": ("snapshot", times, TIME_ATTRS),
                 "xyz": xyz_coordinate(),
             },
             attrs={**attrs, "grid_nx": m.nx, "grid_ny": m.ny,
-                   "projectile_radius": m.body_radius if m.has_body else 0.0,
+                   "projectile_radius": m.body.radius if m.has_body else 0.0,
                    "has_projectile": int(m.has_body)},
         )
-        return ds
 
-    def write(self, attrs: dict[str, str]) -> None:
-        if self.out_dir is None or not self.times:
+    def flush(self, attrs: dict[str, str]) -> None:
+        """Append the snapshots taken since the last flush to snapshots.nc (created with
+        `attrs` by the first) and rewrite the .pvd collections."""
+        if self.out_dir is None:
             return
-        ds = self.to_dataset(attrs)
-        write_netcdf(ds, self.out_dir / "snapshots.nc")
+        if self._pending:
+            path = self.out_dir / "snapshots.nc"
+            ds = self._records(attrs)
+            if self.written == 0 or not path.exists():
+                write_netcdf(ds, path, unlimited="snapshot")
+            else:
+                append_records(path, "snapshot", {
+                    name: ds[name].values for name in ds.variables
+                    if ds[name].dims[:1] == ("snapshot",)})
+            self.written += len(self._pending)
+            self._pending.clear()
         self._write_pvd("fabric")
         if self.model.has_body:
             self._write_pvd("projectile")
 
-    def _write_vtk(self, k: int) -> None:
+    def _write_vtk(self, k: int, snap: tuple) -> None:
         m = self.model
         folder = self.out_dir / "vtk"
         folder.mkdir(parents=True, exist_ok=True)
-        x = self.x[k]
+        _t, x, v, alpha, b = snap
         mesh = meshio.Mesh(
             points=x,
-            cells=[("line", m.seg_nodes)],
-            point_data={"velocity": self.v[k], "displacement": x - m.node_x0.T},
-            cell_data={"damage": [self.alpha[k]]},
+            cells=[("line", m.yarns.ends)],
+            point_data={"velocity": v, "displacement": x - m.nodes.x0.T},
+            cell_data={"damage": [alpha]},
         )
         write_atomic(folder / f"fabric_{k:05d}.vtu", lambda tmp: meshio.write(
             tmp, mesh, file_format="vtu", binary=True, compression=None))
         if self._sphere is not None:
             pts, tris = self._sphere
-            b = self.body[k]
             rot = b[5:8]
-            nose = rot @ m.body_nose
+            nose = rot @ m.body.nose
             world = pts @ rot.T + b[0]
-            along = (pts @ (m.body_nose / np.linalg.norm(m.body_nose))) / m.body_radius
+            along = (pts @ (m.body.nose / np.linalg.norm(m.body.nose))) / m.body.radius
             body_mesh = meshio.Mesh(
                 points=world, cells=[("triangle", tris)],
                 point_data={"nose_alignment": along,
@@ -156,3 +177,23 @@ def _sphere_mesh(radius: float, n_lat: int = 12, n_lon: int = 24):
     for j in range(n_lon):
         tris.append([last + j, south, last + (j + 1) % n_lon])
     return pts, np.array(tris, dtype=np.int64)
+
+
+def snapshot_times(path: Path, count: int) -> list[float]:
+    """Times of the first `count` snapshots in snapshots.nc (a resumed run's snapshots)."""
+    if count == 0:
+        return []
+    return [float(t) for t in read_records(path, "snapshot", count)["time"]]
+
+
+def truncate_snapshots(path: Path, count: int) -> None:
+    """Keep only the first `count` snapshots of snapshots.nc (atomically): those written after
+    the checkpoint a run resumes from are taken again."""
+    if count == 0:
+        path.unlink(missing_ok=True)
+        return
+    with xr.open_dataset(path, mask_and_scale=False) as ds:
+        if ds.sizes["snapshot"] == count:
+            return
+        part = ds.isel(snapshot=slice(0, count)).load()
+    write_netcdf(part, path, unlimited="snapshot")

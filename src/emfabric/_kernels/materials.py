@@ -1,0 +1,62 @@
+"""The yarn material law, one function each: stretch, stress (relaxed KSV 2.3–2.5 or Fung,
+section 6), stored energy, and damage (2.6). Every kernel that needs one of them calls it here.
+
+The tension vector of segment s is the force its first node feels, t_s = (S·A0/L0)·d with
+d = x_b − x_a: from ψ = U·S·A0 along d/L and U = L/L0, so no square root is needed for the force.
+With ``Yarns.stiffness`` = 𝔼·A0/L0 (or c·A0/L0), t_s = stiffness·α·stress_factor(U²)·d.
+"""
+
+import math
+
+from numba import njit
+
+from emfabric._kernels.records import MATERIAL_FUNG
+
+
+@njit(cache=True, inline="always")
+def stretch_sq(dx, dy, dz, inv_rest2):
+    """U² = |d|²/L0² of a segment d = x_b − x_a."""
+    return (dx * dx + dy * dy + dz * dz) * inv_rest2
+
+
+@njit(cache=True, inline="always")
+def ksv_stress(u2):
+    """Relaxed Kirchhoff–Saint-Venant S/𝔼 = max(U² − 1, 0)/2 (2.3–2.4; no compression)."""
+    return 0.5 * max(u2 - 1.0, 0.0)
+
+
+@njit(cache=True, inline="always")
+def fung_stress(u2, fung_h):
+    """Relaxed Fung S/c = H·e·exp(H e²/2), e = max(U² − 1, 0)/2 (section 6)."""
+    e = 0.5 * max(u2 - 1.0, 0.0)
+    return fung_h * e * math.exp(0.5 * fung_h * e * e)
+
+
+@njit(cache=True, inline="always")
+def stress_factor(u2, mat):
+    """S/𝔼 (KSV) or S/c (Fung) at stretch² u2 for the Material record mat."""
+    if mat.kind == MATERIAL_FUNG:
+        return fung_stress(u2, mat.fung_h)
+    return ksv_stress(u2)
+
+
+@njit(cache=True, inline="always")
+def strain_energy_density(u2, mat):
+    """Stored energy per unit reference volume divided by the modulus (𝔼 or c), relaxed."""
+    if u2 <= 1.0:
+        return 0.0
+    e = 0.5 * (u2 - 1.0)
+    if mat.kind == MATERIAL_FUNG:
+        return math.expm1(0.5 * mat.fung_h * e * e)
+    return 0.5 * e * e
+
+
+@njit(cache=True, inline="always")
+def damage(alpha, u2, mat):
+    """Damage α after a stretch² u2, from the committed α (eq. 2.6): irreversible, only past the
+    critical stretch U_c, α = min(α, exp(−λ (U − U_c)/U_c))."""
+    u_crit = mat.critical_stretch
+    rate = mat.damage_rate
+    if u2 > u_crit * u_crit and rate > 0.0:
+        return min(alpha, math.exp(-rate * (math.sqrt(u2) - u_crit) / u_crit))
+    return alpha
