@@ -139,7 +139,8 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
     def wall() -> float:
         return wall_before + time.perf_counter() - wall0
 
-    def save(status: str, reason: str, history: xr.Dataset | None = None) -> None:
+    def save(status: str, reason: str, history: xr.Dataset | None = None,
+             regular: int | None = None) -> None:
         """Append the new records and snapshots (or write the whole `history` with its final
         attributes), then write the checkpoint: in this order, so that the checkpoint only
         counts what is on disk."""
@@ -154,8 +155,8 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
             write_history(history, out / "history.nc")
             written = recorder.count
         snaps.flush(attrs)
-        write_checkpoint(out / CHECKPOINT, model, s_in,
-                         RunPosition(written, snaps.count, next_snap, wall()))
+        write_checkpoint(out / CHECKPOINT, model, s_in, RunPosition(
+            written, snaps.count if regular is None else regular, next_snap, wall()))
 
     next_checkpoint = 0.0  # the first step is saved at once: a killed run always has files
     first_step = True
@@ -185,13 +186,16 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
         status, reason, error = "partial", f"interrupted at t = {s_in.t:.6g} s", exc
     except DivergenceError as exc:
         status, reason, error = "diverged", str(exc), exc
+    # the last state as a snapshot too (the figures of a partial run end there); a resumed run
+    # drops it: the checkpoint counts only the snapshots of the regular interval
+    regular = snaps.count
     if snaps.times[-1] != s_in.t:
         snaps.take(s_in)
     total = wall()
     attrs = run_attributes(model, status, reason, total)
     ds = recorder.to_dataset(attrs)
     # the final attributes (status, end reason, wall time): one rewrite of history.nc per run
-    save(status, reason, ds)
+    save(status, reason, ds, regular)
     result = RunResult(model, s_in, ds, status, reason, total, out)
     result.summary = summarize(result)
     if integ.compiling_in_background and status != "partial":

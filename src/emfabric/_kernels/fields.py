@@ -15,12 +15,12 @@ _ZERO = (0.0, 0.0, 0.0)
 def field_at(fld, x, t):
     """Electric [V/m] and magnetic [T] field at the point x (a 3-tuple, m) and time t [s].
 
-    Uniform, or confined to the half-space z < z0 (zero field outside)."""
-    if fld.region == REGION_HALF_SPACE and not x[2] < fld.z0:
-        return _ZERO, _ZERO
+    Uniform, or confined to the half-space z < z0 (zero field outside). Branch-free (a weight
+    of 1 or 0), so that the node kernel's loops that call it stay vectorised."""
+    w = 1.0 if (fld.region != REGION_HALF_SPACE or x[2] < fld.z0) else 0.0
     e = fld.E
     b = fld.B
-    return (e[0], e[1], e[2]), (b[0], b[1], b[2])
+    return (w * e[0], w * e[1], w * e[2]), (w * b[0], w * b[1], w * b[2])
 
 
 @njit(cache=True, inline="always")

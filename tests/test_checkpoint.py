@@ -1,0 +1,180 @@
+"""A checkpoint is a State: a stopped or killed run resumes to the history an uninterrupted run
+writes, bit for bit; a checkpoint that does not belong to the scenario or version is refused."""
+
+import dataclasses
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import netCDF4
+import numpy as np
+import pytest
+import xarray as xr
+
+import emfabric
+from emfabric.builder import build_model
+from emfabric.io.checkpoint import (
+    CHECKPOINT,
+    CheckpointError,
+    RunPosition,
+    read_checkpoint,
+    write_checkpoint,
+)
+from emfabric.model import State
+from emfabric.runner import resume, run
+from emfabric.scenario import load_scenario
+
+from conftest import interrupted_demo
+
+# a 12 × 12 sheet of the paper's fabric, field on: contact, friction, damage and spin within
+# 300 µs, a few hundred steps
+SMALL = {"fabric.nodes": [12, 12], "solver.end_time": 300e-6, "output.snapshot_interval": 5e-6,
+         "projectile.gap": 0.0}
+
+
+def _same_files(a, b) -> None:
+    """history.nc and snapshots.nc hold the same numbers (attributes aside: wall time)."""
+    for name in ("history.nc", "snapshots.nc"):
+        x, y = xr.open_dataset(a / name), xr.open_dataset(b / name)
+        assert x.sizes == y.sizes, name
+        for v in y.variables:
+            np.testing.assert_array_equal(x[v].values, y[v].values, err_msg=f"{name}: {v}")
+    assert (a / "fabric.pvd").read_text() == (b / "fabric.pvd").read_text()
+
+
+@pytest.fixture(scope="module")
+def uninterrupted(tmp_path_factory):
+    out = tmp_path_factory.mktemp("full")
+    run(load_scenario("demo-small", SMALL), out)
+    return out
+
+
+def test_ctrl_c_then_resume_is_bitwise_the_uninterrupted_run(uninterrupted, tmp_path):
+    interrupted_demo(tmp_path, SMALL, after=150)
+    partial = xr.open_dataset(tmp_path / "history.nc")
+    assert partial.attrs["status"] == "partial" and partial.sizes["time"] == 151
+    result = resume(tmp_path)
+    assert result.status == "complete"
+    assert xr.open_dataset(tmp_path / "history.nc").attrs["status"] == "complete"
+    _same_files(tmp_path, uninterrupted)
+
+
+def test_resume_twice(uninterrupted, tmp_path):
+    """Stopping a resumed run and resuming again still gives the same history."""
+    interrupted_demo(tmp_path, SMALL, after=60)
+    calls = []
+
+    def stop(state, info):
+        calls.append(1)
+        if len(calls) == 80:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        resume(tmp_path, progress=stop)
+    resume(tmp_path)
+    _same_files(tmp_path, uninterrupted)
+
+
+def test_sigkill_then_resume(uninterrupted, tmp_path):
+    """`emfabric run` killed with SIGKILL in the middle of the run leaves a readable history up
+    to its last checkpoint and a checkpoint that `emfabric run --resume` continues."""
+    out = tmp_path / "killed"
+    args = [f"--set={k}={v}".replace(" ", "") for k, v in SMALL.items()]
+    cmd = [sys.executable, "-m", "emfabric", "run", "demo-small", "--out", str(out), "--quiet",
+           "--set=output.checkpoint_seconds=0.01", *args]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    seen: set[int] = set()
+    deadline = time.monotonic() + 300
+    # kill once three different checkpoints have been written (the run is well under way)
+    while proc.poll() is None and time.monotonic() < deadline:
+        try:
+            seen.add((out / CHECKPOINT).stat().st_mtime_ns)
+        except FileNotFoundError:
+            pass
+        if len(seen) >= 3:
+            os.kill(proc.pid, signal.SIGKILL)
+            break
+        time.sleep(0.002)
+    proc.wait()
+    if proc.returncode != -signal.SIGKILL:
+        pytest.skip("the run ended before it could be killed (machine too fast for the test)")
+    ds = xr.open_dataset(out / "history.nc")
+    assert ds.attrs["status"] == "partial"
+    _scenario, _v, state, pos = read_checkpoint(out / CHECKPOINT)
+    assert 0 < state.t < SMALL["solver.end_time"]
+    # the history holds at least the records the checkpoint counts, the last one its State's
+    assert ds.sizes["time"] >= pos.history_rows
+    assert float(ds.time[pos.history_rows - 1]) == state.t
+    r = subprocess.run([sys.executable, "-m", "emfabric", "run", "--resume", str(out),
+                        "--quiet"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    _same_files(out, uninterrupted)
+
+
+def test_checkpoint_round_trips_every_state_field(tmp_path):
+    """Every field of the State comes back exactly (the checkpoint is the whole State)."""
+    model = build_model(load_scenario("demo-small", SMALL))
+    rng = np.random.default_rng(3)
+    values = {}
+    for f in dataclasses.fields(State):
+        if f.name in ("node_x", "node_v", "node_f"):
+            values[f.name] = rng.normal(size=(3, model.node_count))
+        elif f.name == "seg_alpha":
+            values[f.name] = rng.random(model.seg_count)
+        elif f.name == "body":
+            values[f.name] = rng.normal(size=(8, 3))
+        elif f.name == "energy":
+            values[f.name] = rng.normal(size=6)
+        elif f.type == "int":
+            values[f.name] = int(rng.integers(1, 10**9))
+        else:
+            values[f.name] = float(rng.normal())
+    state = State(**values)
+    pos = RunPosition(17, 4, 2.5e-5, 12.25)
+    write_checkpoint(tmp_path / CHECKPOINT, model, state, pos)
+    sc, version, back, pos_back = read_checkpoint(tmp_path / CHECKPOINT)
+    assert version == emfabric.__version__ and sc.to_dict() == model.scenario.to_dict()
+    assert pos_back == pos
+    for f in dataclasses.fields(State):
+        a, b = getattr(state, f.name), getattr(back, f.name)
+        assert type(a) is type(b), f.name
+        np.testing.assert_array_equal(a, b, err_msg=f.name)
+
+
+def test_edited_scenario_is_refused(tmp_path):
+    interrupted_demo(tmp_path, SMALL, after=20)
+    other = load_scenario("demo-small", {**SMALL, "field.B": [0.0, 0.05, 0.0]})
+    with pytest.raises(CheckpointError, match=r"field\.B"):
+        resume(tmp_path, other)
+    # the same scenario, given explicitly, is accepted
+    resume(tmp_path, load_scenario("demo-small", SMALL))
+
+
+def test_other_version_is_refused(tmp_path, monkeypatch):
+    interrupted_demo(tmp_path, SMALL, after=20)
+    monkeypatch.setattr(emfabric, "__version__", "0.0.0-other")
+    with pytest.raises(CheckpointError, match="0.0.0-other"):
+        resume(tmp_path)
+
+
+def test_cli_refuses_a_mismatched_resume(tmp_path):
+    interrupted_demo(tmp_path, SMALL, after=20)
+    r = subprocess.run([sys.executable, "-m", "emfabric", "run", "demo-small", "--resume",
+                        str(tmp_path), "--set", "solver.end_time=1e-4", "--quiet"],
+                       capture_output=True, text=True)
+    assert r.returncode == 2
+    assert "solver.end_time" in r.stderr and "Traceback" not in r.stderr
+    r = subprocess.run([sys.executable, "-m", "emfabric", "run", "--resume",
+                        str(tmp_path / "nowhere")], capture_output=True, text=True)
+    assert r.returncode == 2 and "nothing to resume" in r.stderr
+
+
+def test_history_is_appended_along_an_unlimited_time(tmp_path):
+    """history.nc and snapshots.nc are record files: written as the run goes by appending."""
+    interrupted_demo(tmp_path, SMALL, after=30)
+    for name, dim in (("history.nc", "time"), ("snapshots.nc", "snapshot")):
+        with netCDF4.Dataset(tmp_path / name) as nc:
+            assert nc.dimensions[dim].isunlimited()
+            assert nc.file_format == "NETCDF3_64BIT_OFFSET"
