@@ -48,6 +48,7 @@ def say(text: str = "") -> None:
 
 def best_and_median(fn, repeats: int, target_s: float = 0.25) -> tuple[float, float]:
     """Seconds per call of fn(count) / count: best and median of `repeats` samples."""
+    fn(1)  # the first call may compile: calibrate on the second
     t0 = time.perf_counter()
     fn(1)
     once = time.perf_counter() - t0

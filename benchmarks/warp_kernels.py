@@ -1,7 +1,7 @@
 """emfabric's force evaluation + node update written for NVIDIA Warp, to time on its CPU device.
 
-The same arithmetic as ``emfabric._kernels.yarn.yarn_tensions`` and
-``emfabric._kernels.nodes.node_update`` (one fixed-point iterate of the φ-scheme), written the
+The same arithmetic as ``emfabric._kernels.nodes.fused_iterate`` (the yarn law of
+``emfabric._kernels.materials``, one fixed-point iterate of the φ-scheme), written the
 way a Warp simulator would: node arrays of ``wp.vec3d`` (array of structures), one thread per
 segment, then one thread per node gathering its four neighbouring tensions. Each evaluation is
 two launches, recorded once (``record_cmd=True``) so that Python's share of a launch is as small
@@ -152,8 +152,9 @@ def _scalar(a: np.ndarray, dtype=f64) -> wp.array:
 class WarpEvaluation:
     """Warp copies of one emfabric evaluation's inputs and outputs, and its two launches.
 
-    Built from the same tuples ``fabric_iterate`` takes (``grid, fab, mat, fld`` of an
-    ``Integrator``) and the arrays of one iterate; ``evaluate()`` runs both launches and waits.
+    Built from tuples of the model's records (``grid, fab, mat, fld``: grid size; node mass,
+    inverse mass, charge, yarn stiffness and 1/L0²; material law; field) and the arrays of one
+    iterate; ``evaluate()`` runs both launches and waits.
     """
 
     def __init__(self, grid, fab, mat, fld, xk, x0, v0, f0, alpha_c, skip_err, phi, dt):

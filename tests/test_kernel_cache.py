@@ -57,3 +57,42 @@ def test_unwritable_cache_falls_back_to_a_temporary_folder():
     folder, persistent = _probe({"NUMBA_CACHE_DIR": "/dev/null/not-a-folder"})
     assert not persistent
     assert "emfabric-kernels-" in folder.name
+
+
+def test_cached_kernels_do_not_depend_on_file_times(tmp_path):
+    """A kernel file saved again with the same content (an editor, `git checkout` back and
+    forth) keeps every cached kernel: the cache stamp is the folder's content digest, not the
+    file's mtime (Numba's default would drop that file's kernels and keep their callers)."""
+    from numba.core.caching import FunctionCache
+
+    from emfabric._kernels.sums import fsum
+
+    cache = FunctionCache(fsum.py_func)
+    stamp = cache._impl.locator.get_source_stamp()
+    src = Path(fsum.py_func.__code__.co_filename)
+    before = src.stat()
+    try:
+        os.utime(src, (before.st_atime, before.st_mtime + 1000))
+        assert FunctionCache(fsum.py_func)._impl.locator.get_source_stamp() == stamp
+    finally:
+        os.utime(src, ns=(before.st_atime_ns, before.st_mtime_ns))
+    assert stamp == kernels.CACHE_DIR.name
+
+
+def test_parallel_kernels_are_not_cached_on_their_own():
+    """A parallel kernel loaded from the cache must never be linked into a caller that is then
+    cached (the caller crashed when loaded in a later process): every parallel=True kernel
+    compiles with its caller instead (emfabric._kernels.nodes.fused_iterate_threads)."""
+    import importlib
+
+    from numba.core.caching import NullCache
+    from numba.core.registry import CPUDispatcher
+
+    parallel = []
+    for src in sorted(kernels.KERNEL_DIR.glob("*.py")):
+        module = importlib.import_module(f"emfabric._kernels.{src.stem}")
+        for obj in vars(module).values():
+            if isinstance(obj, CPUDispatcher) and obj.targetoptions.get("parallel"):
+                parallel.append(obj.py_func.__name__)
+                assert isinstance(obj._cache, NullCache), obj.py_func.__name__
+    assert set(parallel) == {"fused_iterate_threads"}  # (imported by step.py too)

@@ -123,8 +123,11 @@ def _install_locator() -> None:
             return str(CACHE_DIR)
 
         def get_source_stamp(self):
-            st = os.stat(self._py_file)
-            return st.st_mtime, st.st_size
+            # the folder's digest, not the file's mtime: the folder holds one version of every
+            # kernel source already, so a file saved again with the same content (an editor,
+            # `git checkout` back and forth) keeps its cached kernels instead of dropping them
+            # while their cached callers in other files stay
+            return CACHE_DIR.name
 
         def get_disambiguator(self):
             return str(self._lineno)

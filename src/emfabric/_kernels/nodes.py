@@ -240,7 +240,7 @@ def fused_iterate(nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_t, x1
     _row_sums(err_num, err_den, nodes.nx, ny, err_rows)
 
 
-@njit(cache=True, parallel=True)
+@njit(parallel=True)  # never cached on its own: see the docstring
 def fused_iterate_threads(nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_t, x1, v1,
                           f1, skip_err, err_rows, err_num, err_den, t1, phi, dt, rowbuf):
     """fused_iterate over blocks of ROWS_PER_BLOCK rows in parallel threads; rowbuf (blocks,
@@ -248,7 +248,14 @@ def fused_iterate_threads(nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alp
     kernel, so results do not depend on the number of threads.
 
     The records are arguments of this function, not taken apart here: Numba's parallel loops
-    accept a named tuple only as a function argument."""
+    accept a named tuple only as a function argument.
+
+    Not cached by itself, only inside its cached callers (the threaded step kernel): a cached
+    caller compiled against this kernel loaded from the cache crashed when it was in turn
+    loaded from the cache (reproduced: `bench.py` (a) caching it first, then a run compiling the
+    threaded step kernel, then any later run; Numba issues #8578 and #10128 describe the same
+    mismatch of a parallel callee's native names between processes). Compiled afresh with its
+    caller, it is linked into the caller's cached code."""
     ny = nodes.ny
     blocks = (ny + ROWS_PER_BLOCK - 1) // ROWS_PER_BLOCK
     for b in prange(blocks):
