@@ -59,6 +59,8 @@ def test_ctrl_c_then_resume_is_bitwise_the_uninterrupted_run(uninterrupted, tmp_
     assert result.status == "complete"
     assert xr.open_dataset(tmp_path / "history.nc").attrs["status"] == "complete"
     _same_files(tmp_path, uninterrupted)
+    with pytest.raises(CheckpointError, match="complete .*nothing to resume"):
+        resume(tmp_path)
 
 
 def test_resume_twice(uninterrupted, tmp_path):

@@ -27,6 +27,7 @@ from emfabric.io.checkpoint import (
 from emfabric.io.history import (
     Recorder,
     append_history,
+    history_status,
     read_history_rows,
     run_attributes,
     write_history,
@@ -89,6 +90,9 @@ def resume(out_dir: str | Path, scenario: Scenario | None = None, *,
             != (model.seg_count,)):
         raise CheckpointError(f"{path}: its arrays do not fit the scenario's grid")
     history = out / "history.nc"
+    status = history_status(history)
+    if status is not None and status[0] == "complete":
+        raise CheckpointError(f"the run in {out} is complete ({status[1]}): nothing to resume")
     try:
         rows = read_history_rows(history, pos.history_rows)
         times = snapshot_times(out / "snapshots.nc", pos.snapshots)

@@ -126,3 +126,14 @@ def read_history_rows(path: Path, count: int) -> np.ndarray:
     for name, sl in LAYOUT.items():
         rows[:, sl] = raw[name].reshape(count, -1)
     return rows
+
+
+def history_status(path: Path) -> tuple[str, str] | None:
+    """(status, end_reason) of a history.nc, or None if it cannot be read."""
+    import netCDF4
+
+    try:
+        with netCDF4.Dataset(path, "r") as nc:
+            return str(nc.getncattr("status")), str(nc.getncattr("end_reason"))
+    except (OSError, AttributeError, KeyError):
+        return None
