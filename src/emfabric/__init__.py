@@ -31,6 +31,8 @@ _LAZY = {
     "State": "emfabric.model",
     "RunResult": "emfabric.runner",
     "run": "emfabric.runner",
+    "resume": "emfabric.runner",
+    "initial_state": "emfabric.state",
 }
 
 
@@ -54,7 +56,9 @@ __all__ = [
     "__version__",
     "build_model",
     "builtin_names",
+    "initial_state",
     "load_scenario",
+    "resume",
     "run",
     "scenario_from_dict",
 ]

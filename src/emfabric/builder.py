@@ -17,6 +17,7 @@ from emfabric._kernels.records import (
     Nodes,
     Yarns,
 )
+from emfabric._kernels.shapes import SHAPES
 from emfabric.model import Model
 from emfabric.scenario import Scenario, ScenarioError
 
@@ -78,7 +79,7 @@ def build_model(scenario: Scenario) -> Model:
     node_v0[:, free] = np.asarray(fab.velocity, dtype=float)[:, None]
 
     pr = scenario.projectile
-    has_body = pr.shape == "sphere"
+    has_body = pr.shape in SHAPES
     radius = pr.radius
     if pr.principal_inertia is None:
         inertia = np.eye(3) * (0.4 * pr.mass * radius**2)
@@ -123,7 +124,7 @@ def build_model(scenario: Scenario) -> Model:
         ),
         body=Body(
             active=has_body,
-            shape=SHAPE_SPHERE,
+            shape=SHAPES.get(pr.shape, SHAPE_SPHERE),  # "none": no body, shape unused
             radius=float(radius),
             mass=float(pr.mass),
             inertia=inertia,
