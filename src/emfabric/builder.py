@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 from emfabric._kernels.records import (
@@ -29,8 +31,43 @@ def grid_coordinates(n: int, size: float) -> np.ndarray:
     return h * (np.arange(n, dtype=np.float64) - 0.5 * (n - 1))
 
 
+BYTES_PER_NODE = 1200
+"""Memory a run needs per fabric node [B], rounded up from `python benchmarks/bench.py` (d):
+model, two states and the step workspace take ~500 B per node; snapshots waiting to be written,
+the threaded kernel's row buffers and NumPy temporaries while building take the rest."""
+
+
+def memory_needed(scenario: Scenario) -> int:
+    """Bytes a run of this scenario needs (estimate, before anything is allocated)."""
+    nx, ny = scenario.fabric.nodes
+    return BYTES_PER_NODE * nx * ny
+
+
+def memory_available() -> int | None:
+    """Physical memory of this machine [B] (None where the OS does not say)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_memory(scenario: Scenario) -> None:
+    """Refuse a grid that cannot fit in this machine's memory, before allocating it."""
+    need = memory_needed(scenario)
+    have = memory_available()
+    if have is not None and need > 0.8 * have:
+        nx, ny = scenario.fabric.nodes
+        raise ScenarioError(
+            f"fabric.nodes = [{nx}, {ny}]: a run needs about {need / 2**30:.3g} GiB "
+            f"({BYTES_PER_NODE} B per node), this machine has {have / 2**30:.3g} GiB; allowed: "
+            f"grids up to about {int((0.8 * have / BYTES_PER_NODE) ** 0.5)} × "
+            f"{int((0.8 * have / BYTES_PER_NODE) ** 0.5)} nodes here"
+        )
+
+
 def build_model(scenario: Scenario) -> Model:
     """Everything a step reads, from a validated scenario."""
+    check_memory(scenario)
     fab = scenario.fabric
     nx, ny = fab.nodes
     lx, ly = fab.size
@@ -97,7 +134,7 @@ def build_model(scenario: Scenario) -> Model:
     charge_q = np.array([c.charge for c in pr.charges], dtype=float)
 
     fld = scenario.field
-    return Model(
+    model = Model(
         scenario=scenario,
         nodes=Nodes(nx, ny, node_x0, node_mass, node_inv_mass, node_charge),
         yarns=Yarns(
@@ -139,6 +176,67 @@ def build_model(scenario: Scenario) -> Model:
         body_w0=np.asarray(pr.angular_velocity, dtype=float),
         node_v0=node_v0,
     )
+    check_geometry(model)
+    check_stability(model)
+    return model
+
+
+def check_geometry(model: Model) -> None:
+    """Refuse a projectile that overlaps the fabric at t = 0 (it would start inside the sheet
+    and create energy from nothing): a node inside the body, or the sheet's plane cutting the
+    body within the sheet's extent."""
+    if not model.has_body:
+        return
+    from emfabric._kernels.step import _nodes_inside
+
+    state = np.zeros((8, 3))
+    state[0] = model.body_x0
+    state[5:8] = np.eye(3)
+    n = model.node_count
+    inside = _nodes_inside(model.nodes.x0, np.ones(n), np.zeros(n, dtype=np.uint8), model.body,
+                           state)
+    x0 = model.nodes.x0
+    reach = model.body.radius  # bounding radius of the sphere
+    c = model.body_x0
+    plane_cut = (abs(c[2]) < reach and x0[0].min() - reach < c[0] < x0[0].max() + reach
+                 and x0[1].min() - reach < c[1] < x0[1].max() + reach)
+    if inside or plane_cut:
+        sc = model.scenario.projectile
+        where = (f"projectile.position = {list(sc.position)}" if sc.position is not None else
+                 f"projectile.gap = {sc.gap}")
+        raise ScenarioError(
+            f"{where}: the projectile (centre {[round(float(v), 6) for v in c]} m, radius "
+            f"{reach} m) overlaps the fabric at t = 0 ({inside} nodes inside it); allowed: a "
+            f"start clear of the sheet, e.g. centre z ≥ radius + gap above it"
+        )
+
+
+STABILITY_MARGIN = 1.5
+"""Stiffening the explicit stability limit allows for: the relaxed law's tangent stiffness grows
+as (3U² − 1)/2 with the stretch U (1.5 at U ≈ 1.15)."""
+
+
+def check_stability(model: Model) -> None:
+    """Refuse a φ < 1/2 scheme whose dt_max exceeds the network's stability limit (the scheme is
+    only conditionally stable there and nothing iterates to notice): Δt ≤ 2/(ω_max √(1 − 2φ))
+    with ω_max² = 8·k_max/m_min, k the yarn stiffness 𝔼A0/L0 at rest times STABILITY_MARGIN."""
+    solver = model.scenario.solver
+    if solver.phi >= 0.5:
+        return
+    free = model.nodes.inv_mass > 0
+    if not free.any():
+        return
+    k = STABILITY_MARGIN * float(model.yarns.stiffness.max())
+    m = float(model.nodes.mass[free].min())
+    if model.material.kind == MATERIAL_FUNG:
+        k *= max(float(model.material.fung_h), 1.0)
+    limit = 2.0 / ((8.0 * k / m) ** 0.5 * (1.0 - 2.0 * solver.phi) ** 0.5)
+    if solver.dt_max > limit:
+        raise ScenarioError(
+            f"solver.dt_max = {solver.dt_max:g} s with solver.phi = {solver.phi}: the φ-scheme "
+            f"is only conditionally stable for φ < 0.5 and this fabric's limit is "
+            f"{limit:.3g} s; allowed: dt_max ≤ {limit:.3g} s, or phi ≥ 0.5"
+        )
 
 
 def _modulus_factors(count: int, cv: float, seed: int) -> np.ndarray:

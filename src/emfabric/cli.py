@@ -74,6 +74,8 @@ def run(
             return run_scenario(sc, out_dir, progress=progress_fn)
     show_messages()
     signal.signal(signal.SIGTERM, _sigterm_as_interrupt)
+    if hasattr(signal, "SIGHUP"):  # the terminal closed: keep the files, as for SIGTERM
+        signal.signal(signal.SIGHUP, _sigterm_as_interrupt)
     t_end = sc.solver.end_time
     result = None
     with Progress(

@@ -128,7 +128,84 @@ def left_for_good(model: Model, state: State, fab: FabricDiagnostics) -> str | N
     vb = float(state.body_v @ model.flight_direction)
     clear = 1.05 * model.body.radius
     if vb < 0 and fab.ahead_min > clear and fab.approach_max < -vb:
-        return "rebound"
+        return "rebound" if state.contact_steps else "never touched"
     if vb > 0 and fab.ahead_max < -clear and fab.recede_max < vb:
-        return "perforation"
+        return "perforation" if state.contact_steps else "never touched"
     return None
+
+
+ENERGY_BALANCE_FRACTION = 0.05
+"""A run whose energy balance error exceeds this fraction of the energy put in has diverged."""
+ENERGY_FLOOR = 1e-9
+"""[J] added to the energy put in (a run at rest has none)."""
+SPEED_FACTOR = 100.0
+"""A speed above this many times the fastest plausible one (initial speeds, yarn wave speed)."""
+SIZE_FACTOR = 1000.0
+"""A position farther than this many times the scene's size from the origin."""
+STRETCH_LIMIT = 100.0
+"""A yarn stretched beyond U = L/L0 = 100."""
+
+
+class Limits(NamedTuple):
+    """The bounds of plausible motion for one model (check_plausible)."""
+
+    speed: float
+    """[m/s]"""
+    distance: float
+    """[m]"""
+
+
+def limits(model: Model) -> Limits:
+    nodes, yarns = model.nodes, model.yarns
+    free = nodes.inv_mass > 0
+    # longitudinal wave speed of the yarn network, L0·sqrt(k/m), the fastest a disturbance runs
+    m = float(nodes.mass[free].min()) if free.any() else float(nodes.mass.min())
+    wave = float((yarns.rest_length * np.sqrt(yarns.stiffness / m)).max())
+    spin = float(np.linalg.norm(model.body_w0)) * model.body.radius if model.has_body else 0.0
+    fastest = max(wave, float(np.linalg.norm(model.body_v0)), spin,
+                  float(np.abs(model.node_v0).max(initial=0.0)) * 3 ** 0.5)
+    size = float(np.abs(nodes.x0).max()) + float(np.linalg.norm(model.body_x0)) \
+        + model.body.radius
+    return Limits(SPEED_FACTOR * fastest, SIZE_FACTOR * size)
+
+
+def check_plausible(model: Model, state: State, row: np.ndarray, lim: Limits) -> str | None:
+    """Why the state just recorded is not physical (non-finite values, an energy balance error
+    beyond ENERGY_BALANCE_FRACTION of the energy put in, motion beyond the limits), else None."""
+    bad = ~np.isfinite(row)
+    if bad.any():
+        names = [n for n, (w, _u, _l) in RECORD.items() if bad[LAYOUT[n]].any()]
+        return f"non-finite values in {', '.join(names[:4])}"
+    energy_in = (abs(state.energy_initial) + abs(float(state.energy[0]))
+                 + abs(float(state.energy[1])) + ENERGY_FLOOR)
+    balance = float(row[LAYOUT["energy_balance_error"]][0])
+    if abs(balance) > ENERGY_BALANCE_FRACTION * energy_in:
+        return (f"energy balance error {balance:.3g} J exceeds "
+                f"{ENERGY_BALANCE_FRACTION:.0%} of the energy put in ({energy_in:.3g} J)")
+    if model.has_body:
+        v = float(np.linalg.norm(state.body_v))
+        x = float(np.linalg.norm(state.body_x))
+        if v > lim.speed:
+            return f"projectile speed {v:.3g} m/s beyond the plausible {lim.speed:.3g} m/s"
+        if x > lim.distance:
+            return (f"projectile {x:.3g} m from the origin, beyond the plausible "
+                    f"{lim.distance:.3g} m")
+    defl = float(row[LAYOUT["max_deflection"]][0])
+    if defl > lim.distance:
+        return f"fabric deflection {defl:.3g} m beyond the plausible {lim.distance:.3g} m"
+    stretch = float(row[LAYOUT["max_stretch"]][0])
+    if stretch > STRETCH_LIMIT:
+        return f"yarn stretch U = {stretch:.3g} beyond the plausible {STRETCH_LIMIT:g}"
+    return None
+
+
+def _layout() -> dict[str, slice]:
+    """Columns of each RECORD variable in a history row."""
+    out, col = {}, 1  # column 0 is time
+    for name, (width, _u, _l) in RECORD.items():
+        out[name] = slice(col, col + width)
+        col += width
+    return out
+
+
+LAYOUT = _layout()

@@ -221,6 +221,7 @@ class Integrator:
         s_out.error = err
         s_out.last_dt = dt
         s_out.contact_count = nc
+        s_out.contact_steps = s_in.contact_steps + (1 if nc > 0 else 0)
         return StepInfo(t=s_out.t, dt=dt, iterations=k, error=err, rejected=rejected,
                         evaluations=evaluations, contacts=nc)
 

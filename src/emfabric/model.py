@@ -128,6 +128,8 @@ class State:
     """The last accepted step [s]."""
     contact_count: int = 0
     """Nodes in contact after the last step."""
+    contact_steps: int = 0
+    """Accepted steps that ended with a node in contact (0: the projectile never touched)."""
     energy: np.ndarray = field(default_factory=lambda: np.zeros(len(ENERGY_TERMS)))
     """Cumulative energy terms [J], see ENERGY_TERMS."""
     energy_initial: float = math.nan

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
+import signal
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -14,7 +17,7 @@ import xarray as xr
 
 from emfabric._kernels import CACHE_DIR, CACHE_PERSISTENT, is_compiled, mark_compiled
 from emfabric.builder import build_model
-from emfabric.diagnostics import left_for_good, measure
+from emfabric.diagnostics import check_plausible, left_for_good, limits, measure
 from emfabric.integrator import DivergenceError, Integrator, StepInfo
 from emfabric.io.checkpoint import (
     CHECKPOINT,
@@ -137,6 +140,7 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
         written = recorder.count
         log.info("resuming at t = %.6g s (step %d)", s_in.t, s_in.steps)
     s_out = s_in.copy()
+    lim = limits(model)
     status, reason = "complete", "end_time"
     error: BaseException | None = None
 
@@ -152,15 +156,18 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
         if out is None:
             return
         attrs = run_attributes(model, status, reason, wall())
-        if history is None:
-            written = append_history(out / "history.nc", recorder.rows[written:], attrs,
-                                     written)
-        else:
-            write_history(history, out / "history.nc")
-            written = recorder.count
-        snaps.flush(attrs)
-        write_checkpoint(out / CHECKPOINT, model, s_in, RunPosition(
-            written, snaps.count if regular is None else regular, next_snap, wall()))
+        with _naming(out / "history.nc"):
+            if history is None:
+                written = append_history(out / "history.nc", recorder.rows[written:], attrs,
+                                         written)
+            else:
+                write_history(history, out / "history.nc")
+                written = recorder.count
+        with _naming(out / "snapshots.nc"):
+            snaps.flush(attrs)
+        with _naming(out / CHECKPOINT):
+            write_checkpoint(out / CHECKPOINT, model, s_in, RunPosition(
+                written, snaps.count if regular is None else regular, next_snap, wall()))
 
     next_checkpoint = 0.0  # the first step is saved at once: a killed run always has files
     first_step = True
@@ -168,7 +175,13 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
         while s_in.t < t_end * (1 - 1e-12):
             info = integ.step(s_in, s_out, dt_limit=t_end - s_in.t)
             s_in, s_out = s_out, s_in
-            fab = measure(model, s_in, recorder.new_row())
+            row = recorder.new_row()
+            fab = measure(model, s_in, row)
+            wrong = check_plausible(model, s_in, row, lim)
+            if wrong is not None:
+                raise DivergenceError(
+                    f"diverged at t = {s_in.t:.6g} s, Δt = {info.dt:.3g} s: {wrong} (the state "
+                    f"of this step is the history's last record)", s_in.t, info.dt, -1, 0.0)
             if first_step:
                 first_step = False
                 mark_compiled(integ.variant())
@@ -190,6 +203,8 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
         status, reason, error = "partial", f"interrupted at t = {s_in.t:.6g} s", exc
     except DivergenceError as exc:
         status, reason, error = "diverged", str(exc), exc
+    except OutputError as exc:
+        status, reason, error = "failed", str(exc), exc
     # the last state as a snapshot too (the figures of a partial run end there); a resumed run
     # drops it: the checkpoint counts only the snapshots of the regular interval
     regular = snaps.count
@@ -198,8 +213,15 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
     total = wall()
     attrs = run_attributes(model, status, reason, total)
     ds = recorder.to_dataset(attrs)
-    # the final attributes (status, end reason, wall time): one rewrite of history.nc per run
-    save(status, reason, ds, regular)
+    # the final attributes (status, end reason, wall time): one rewrite of history.nc per run;
+    # a second Ctrl-C (or SIGTERM, SIGHUP) while the files are written waits for them
+    with _signals_deferred():
+        try:
+            save(status, reason, ds, regular)
+        except OutputError as exc:
+            log.error("%s; the files written before are kept", exc)
+            if error is None:
+                status, reason, error = "failed", str(exc), exc
     result = RunResult(model, s_in, ds, status, reason, total, out)
     result.summary = summarize(result)
     if integ.compiling_in_background and status != "partial":
@@ -209,6 +231,44 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
         error.result = result  # type: ignore[attr-defined]
         raise error
     return result
+
+
+class OutputError(OSError):
+    """An output file could not be written (full disk, permissions): names the file."""
+
+
+@contextlib.contextmanager
+def _naming(path: Path):
+    """Turn an OS error while writing `path` into an OutputError that names it."""
+    try:
+        yield
+    except OSError as err:
+        if isinstance(err, OutputError):
+            raise
+        why = err.strerror or str(err)
+        raise OutputError(f"cannot write {path}: {why}") from err
+
+
+@contextlib.contextmanager
+def _signals_deferred():
+    """Hold SIGINT, SIGTERM and SIGHUP while the final files are written (main thread only);
+    a signal that arrives meanwhile is re-raised as KeyboardInterrupt afterwards."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    names = [n for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n)]
+    old = {}
+    for n in names:
+        sig = getattr(signal, n)
+        old[sig] = signal.signal(sig, lambda s, _f: caught.append(s))
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+    if caught:
+        log.info("signal received while writing the files: they are complete")
 
 
 def summarize(result: RunResult) -> dict[str, float | int | str]:

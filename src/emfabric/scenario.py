@@ -36,7 +36,9 @@ class ScenarioError(ValueError):
 
 
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+    # strict: no string-to-number or number-to-bool coercion (a TOML "0.037" is an error)
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True, strict=True,
+                              use_attribute_docstrings=True)
 
 
 class Material(_Section):
@@ -181,8 +183,9 @@ class Solver(_Section):
 class Output(_Section):
     snapshot_interval: PositiveFloat = 10e-6
     """Simulated time between snapshots [s]."""
-    checkpoint_seconds: PositiveFloat = 30.0
-    """Wall time between rewrites of history.nc during a run [s]."""
+    checkpoint_seconds: PositiveFloat = 5.0
+    """Wall time between checkpoints [s]: new history records and snapshots are appended and
+    checkpoint.nc is replaced (a killed run loses at most this much)."""
 
 
 class Scenario(_Section):
@@ -198,8 +201,10 @@ class Scenario(_Section):
     @field_validator("name")
     @classmethod
     def _name_is_simple(cls, v: str) -> str:
-        if not v or any(ch in v for ch in "/\\\n"):
-            raise ValueError("name must be a non-empty single line without slashes")
+        if (not v or v in (".", "..") or any(ch in v for ch in "/\\\n\r\0")
+                or v != v.strip()):
+            raise ValueError("allowed: a non-empty single-line name without path separators, "
+                             "not '.' or '..' (it names the default output folder)")
         return v
 
     def to_dict(self) -> dict[str, Any]:
@@ -276,12 +281,23 @@ def _model_in(ann: Any) -> type[BaseModel] | None:
     return None
 
 
+def _tuples(obj: Any) -> Any:
+    """Lists (TOML arrays) as tuples, which strict validation takes for the vector fields."""
+    if isinstance(obj, dict):
+        return {k: _tuples(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return tuple(_tuples(v) for v in obj)
+    return obj
+
+
 def scenario_from_dict(data: dict[str, Any], source: str = "<dict>") -> Scenario:
     """Validate a nested dict into a Scenario; errors name the dotted key."""
     try:
-        return Scenario.model_validate(data)
+        return Scenario.model_validate(_tuples(data))
     except ValidationError as err:
         raise ScenarioError(_format_errors(err, source)) from None
+    except RecursionError:
+        raise ScenarioError(f"invalid scenario ({source}): values nested too deeply") from None
 
 
 def builtin_names() -> list[str]:
@@ -306,8 +322,14 @@ def load_scenario(source: str | Path, overrides: dict[str, Any] | None = None) -
     if path.suffix == ".toml" or path.exists():
         if not path.is_file():
             raise ScenarioError(f"scenario file {str(path)!r} does not exist")
-        text = path.read_text(encoding="utf-8")
+        raw = path.read_bytes()
         label = str(path)
+        try:
+            text = raw.decode("utf-8")
+        except UnicodeDecodeError as err:
+            raise ScenarioError(f"scenario file {label!r} is not UTF-8 text (byte "
+                                f"{raw[err.start]:#04x} at offset {err.start}); save it as "
+                                f"UTF-8") from None
     else:
         text = builtin_text(str(source))
         label = f"built-in {source!r}"
@@ -315,6 +337,8 @@ def load_scenario(source: str | Path, overrides: dict[str, Any] | None = None) -
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:
         raise ScenarioError(f"invalid TOML in {label}: {err}") from None
+    except RecursionError:
+        raise ScenarioError(f"invalid TOML in {label}: arrays nested too deeply") from None
     data.setdefault("name", path.stem if label == str(path) else str(source))
     scenario = scenario_from_dict(data, label)
     return apply_overrides(scenario, overrides or {})
@@ -331,8 +355,12 @@ def parse_override(text: str) -> tuple[str, Any]:
     except tomllib.TOMLDecodeError:
         try:
             value = ast.literal_eval(raw)
-        except (ValueError, SyntaxError):
+        except (ValueError, SyntaxError, TypeError, MemoryError):
             value = raw
+        except RecursionError:
+            raise ScenarioError(f"override {key!r}: value nested too deeply") from None
+    except RecursionError:
+        raise ScenarioError(f"override {key!r}: value nested too deeply") from None
     return key, value
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from emfabric.diagnostics import COLUMNS, RECORD
+from emfabric.diagnostics import COLUMNS, LAYOUT, RECORD
 from emfabric.io.netcdf import (
     CONVENTIONS,
     REFERENCES,
@@ -25,15 +25,6 @@ INTEGER_VARIABLES = ("iterations", "rejected_steps", "force_evaluations", "conta
                      "broken_yarns")
 
 
-def _layout() -> dict[str, slice]:
-    out, col = {}, 1  # column 0 is time
-    for name, (width, _u, _l) in VARIABLES.items():
-        out[name] = slice(col, col + width)
-        col += width
-    return out
-
-
-LAYOUT = _layout()
 
 
 class Recorder:

@@ -1,0 +1,107 @@
+"""Never silently wrong: physical guards in the loop, geometry and stability checks before the
+run, strict scenario values, hostile input, SIGHUP."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+import xarray as xr
+
+from emfabric.builder import BYTES_PER_NODE, build_model, memory_available
+from emfabric.integrator import DivergenceError
+from emfabric.runner import run
+from emfabric.scenario import ScenarioError, load_scenario, parse_override
+
+SMALL = {"fabric.nodes": [12, 12], "output.snapshot_interval": 5e-6, "projectile.gap": 0.0}
+
+
+def _small(**kw):
+    return load_scenario("demo-small", {**SMALL, **kw})
+
+
+def test_blow_up_is_diverged_not_complete(tmp_path):
+    """E = 1e12 V/m on charged nodes: the explicit part explodes within a step; the energy
+    guard stops the run as diverged, history marked, the reason names the quantity."""
+    with pytest.raises(DivergenceError, match="energy balance error") as info:
+        run(_small(**{"field.E": [1e12, 0.0, 0.0], "solver.end_time": 50e-6}), tmp_path)
+    assert info.value.result.status == "diverged"
+    ds = xr.open_dataset(tmp_path / "history.nc")
+    assert ds.attrs["status"] == "diverged" and "energy balance" in ds.attrs["end_reason"]
+
+
+def test_explicit_scheme_above_its_stability_limit_is_refused():
+    with pytest.raises(ScenarioError, match=r"solver\.dt_max = 1e-05 s with solver\.phi = 0"):
+        build_model(_small(**{"solver.phi": 0.0, "solver.dt_max": 1e-5}))
+    # the same scheme well inside the limit (2/ω_max ≈ 0.2 µs here at φ = 0) is accepted
+    build_model(_small(**{"solver.phi": 0.0, "solver.dt_max": 1e-8, "solver.dt_min": 1e-14}))
+
+
+def test_projectile_overlapping_the_fabric_is_refused():
+    with pytest.raises(ScenarioError, match=r"projectile\.position = \[0\.0, 0\.0, 0\.0\]"):
+        build_model(_small(**{"projectile.position": [0.0, 0.0, 0.0]}))
+
+
+def test_a_projectile_that_never_touches_says_so():
+    res = run(_small(**{"projectile.velocity": [0.0, 0.0, 250.0], "solver.end_time": 100e-6}))
+    assert res.end_reason == "never touched"
+    res = run(_small(**{"solver.end_time": 60e-6}))
+    assert res.end_reason == "end_time" and res.state.contact_steps > 0
+
+
+@pytest.mark.parametrize("key, value", [
+    ("projectile.mass", "0.037"),          # a string where a number is meant
+    ("fabric.nodes", [True, 5]),           # a boolean where an integer is meant
+    ("solver.adaptive", 1),                # a number where a boolean is meant
+    ("fabric.size", [10**400, 0.2]),       # an integer too large for a float
+    ("name", ".."),                        # names the output folder
+    ("name", "a/b"),
+])
+def test_strict_values(key, value):
+    with pytest.raises(ScenarioError, match=key.replace(".", r"\.")):
+        load_scenario("paper-field", {key: value})
+
+
+def test_hostile_files_and_overrides(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_bytes(b'name = "caf\xe9"\n')
+    with pytest.raises(ScenarioError, match="not UTF-8 text"):
+        load_scenario(bad)
+    deep = tmp_path / "deep.toml"
+    deep.write_text("x = " + "[" * 5000 + "]" * 5000 + "\n")
+    with pytest.raises(ScenarioError):
+        load_scenario(deep)
+    with pytest.raises(ScenarioError, match="nested too deeply"):
+        parse_override("fabric.size=" + "[" * 100000 + "]" * 100000)
+
+
+def test_grid_beyond_memory_is_refused_before_allocating():
+    have = memory_available()
+    if have is None:
+        pytest.skip("this OS does not report its memory")
+    n = int((have / BYTES_PER_NODE) ** 0.5) + 10
+    with pytest.raises(ScenarioError, match=r"fabric\.nodes = \[\d+, \d+\]: a run needs about"):
+        build_model(load_scenario("paper-field", {"fabric.nodes": [n, n]}))
+
+
+def test_sighup_keeps_a_readable_partial_history(tmp_path):
+    """Closing the terminal (SIGHUP) is handled like SIGTERM: valid files, marked partial."""
+    out = tmp_path / "hup"
+    cmd = [sys.executable, "-m", "emfabric", "run", "demo-small", "--out", str(out), "--quiet",
+           "--set=solver.end_time=5e-3", "--set=projectile.velocity=[0,0,0]",
+           "--set=output.checkpoint_seconds=0.05"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 300
+    while proc.poll() is None and time.monotonic() < deadline:
+        if (out / "checkpoint.nc").exists():
+            time.sleep(0.3)
+            os.kill(proc.pid, signal.SIGHUP)
+            break
+        time.sleep(0.01)
+    _out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    ds = xr.open_dataset(out / "history.nc")
+    assert ds.attrs["status"] == "partial" and ds.sizes["time"] > 1
+    assert "Traceback" not in err
