@@ -105,3 +105,31 @@ def test_sighup_keeps_a_readable_partial_history(tmp_path):
     ds = xr.open_dataset(out / "history.nc")
     assert ds.attrs["status"] == "partial" and ds.sizes["time"] > 1
     assert "Traceback" not in err
+
+
+def _cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "emfabric", *args], capture_output=True,
+                          text=True, cwd=cwd)
+
+
+def test_output_folder_holding_a_run_is_refused_unless_forced(tmp_path):
+    out = tmp_path / "d"
+    quick = ["--set=solver.end_time=2e-6", "--set=fabric.nodes=[8,8]", "-q"]
+    assert _cli("run", "demo-small", "--out", str(out), *quick).returncode == 0
+    (out / "vtk" / "stale_99999.vtu").write_text("old")
+    r = _cli("run", "demo-small", "--out", str(out), *quick)
+    assert r.returncode == 2 and "--force" in r.stderr and "demo-small" in r.stderr
+    r = _cli("run", "demo-small", "--out", str(out), "--force", *quick)
+    assert r.returncode == 0, r.stderr
+    assert not (out / "vtk" / "stale_99999.vtu").exists()
+
+
+def test_default_folder_comes_from_the_file_name(tmp_path):
+    """A copied scenario keeps name = "paper-field"; its runs go to runs/<file stem>."""
+    text = (load_scenario("demo-small").to_toml())
+    (tmp_path / "mine.toml").write_text(text)
+    r = _cli("run", "mine.toml", "--set=solver.end_time=2e-6", "--set=fabric.nodes=[8,8]", "-q",
+             cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "runs" / "mine" / "history.nc").exists()
+    assert not (tmp_path / "runs" / "demo-small").exists()

@@ -45,6 +45,8 @@ def run(
         "--json", help="Print the summary as JSON on stdout")] = False,
     resume: Annotated[Path | None, typer.Option(
         "--resume", help="Continue the run whose checkpoint is in this folder")] = None,
+    force: Annotated[bool, typer.Option(
+        "--force", help="Replace the run already in the output folder")] = False,
 ) -> None:
     """Run a scenario; write history.nc, snapshots, ParaView files and a checkpoint into the output folder as the run goes (--resume DIR continues a stopped run)."""  # noqa: E501
     from emfabric.io.checkpoint import CHECKPOINT, CheckpointError, read_checkpoint
@@ -68,7 +70,21 @@ def run(
             return resume_run(resume, given, progress=progress_fn)
     else:
         sc = _load(scenario or "paper-field", set_)
-        out_dir = out if out is not None else Path("runs") / sc.name
+        if out is not None:
+            out_dir = out
+        elif scenario is not None and Path(scenario).is_file():
+            out_dir = Path("runs") / Path(scenario).stem  # a copied file keeps its own folder
+        else:
+            out_dir = Path("runs") / sc.name
+        from emfabric.io.outputs import clear_run, run_in
+
+        held = run_in(out_dir)
+        if held is not None and not force:
+            error(f"{out_dir} holds another run ({held}); use --force to replace it, "
+                  f"--resume {out_dir} to continue it, or --out to write elsewhere")
+            raise typer.Exit(2)
+        if held is not None:
+            clear_run(out_dir)
 
         def start(progress_fn):
             return run_scenario(sc, out_dir, progress=progress_fn)
