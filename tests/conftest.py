@@ -13,8 +13,10 @@ def make(**dotted) -> Scenario:
 
 
 def fabric_only(**dotted) -> Scenario:
-    """A field-actuated fabric without projectile, no damage, no modulus scatter."""
+    """A field-actuated fabric without projectile, no damage, no modulus scatter; yarn area and
+    node charge as given at this spacing (rescale off: the tests set q and m per node)."""
     base = {
+        "fabric.rescale": False,
         "projectile.shape": "none",
         "fabric.material.modulus_cv": 0.0,
         "fabric.damage.rate": 0.0,

@@ -133,3 +133,28 @@ def test_default_folder_comes_from_the_file_name(tmp_path):
     assert r.returncode == 0, r.stderr
     assert (tmp_path / "runs" / "mine" / "history.nc").exists()
     assert not (tmp_path / "runs" / "demo-small").exists()
+
+
+def test_a_coarser_grid_is_the_same_fabric_by_default(tmp_path):
+    """fabric.nodes = [40, 40] without more: the paper's fabric at another resolution (MODEL §1):
+    the same stiffness per unit width (𝔼A0 of a yarn over the spacing) and the same q/m;
+    rescale = false, the explicit other choice, is a 2.5 × softer sheet."""
+    paper = build_model(load_scenario("paper-field"))
+    coarse = build_model(load_scenario("paper-field", {"fabric.nodes": [40, 40]}))
+    given = build_model(load_scenario("paper-field", {"fabric.nodes": [40, 40],
+                                                      "fabric.rescale": False}))
+
+    def per_width(m):  # axial stiffness 𝔼A0 of one yarn per unit width of sheet [N/m]
+        return m.yarns.modulus[0] * m.yarns.area / m.yarns.rest_length[0]
+
+    def q_over_m(m):
+        return m.nodes.charge[0] / m.nodes.mass[0]
+
+    assert per_width(coarse) / per_width(paper) == pytest.approx(1.0, rel=1e-12)
+    assert q_over_m(coarse) == pytest.approx(q_over_m(paper), rel=1e-12)
+    assert per_width(given) / per_width(paper) == pytest.approx(39 / 99, rel=1e-12)
+    res = run(load_scenario("paper-field", {"fabric.nodes": [12, 12],
+                                            "solver.end_time": 1e-6}), tmp_path)
+    assert "100 x 100 reference" in xr.open_dataset(tmp_path / "history.nc").attrs[
+        "fabric_reference"]
+    assert "100 x 100 reference" in res.summary["fabric"]

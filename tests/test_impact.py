@@ -11,9 +11,10 @@ H = 0.254 / 99  # the paper's node spacing
 
 
 def _patch(n, **kw):
-    """An n×n patch with the paper's spacing and node mass, sphere just touching the centre."""
+    """An n×n patch cut from the paper's sheet (its spacing, yarns and node charge: rescale
+    off, the patch is not a 100 × 100 grid of its own size), sphere just touching the centre."""
     return make(**{"fabric.nodes": [n, n], "fabric.size": [(n - 1) * H, (n - 1) * H],
-                   "projectile.gap": 0.0, **kw})
+                   "fabric.rescale": False, "projectile.gap": 0.0, **kw})
 
 
 def _momenta(ds):

@@ -1,4 +1,4 @@
-"""Command line: ``emfabric run | validate | scenarios | plot | animate``."""
+"""Command line: ``emfabric run | validate | new | scenarios | plot | animate``."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
@@ -126,8 +127,8 @@ def run(
         except KeyboardInterrupt as exc:
             result = getattr(exc, "result", None)
             console.print("[yellow]interrupted[/]: the history written so far is marked partial;"
-                          f" continue with `emfabric run --resume {out_dir}`", markup=True,
-                          highlight=False)
+                          f" continue with `emfabric run --resume {escape(str(out_dir))}`",
+                          markup=True, highlight=False)
         except CheckpointError as exc:
             error(str(exc))
             raise typer.Exit(2) from None
@@ -152,8 +153,9 @@ def _print_summary(result, as_json: bool) -> None:
     if as_json:
         emit(json.dumps(s, indent=2))
         return
-    table = Table(title=f"{result.model.scenario.name}: {s['status']} ({s['end_reason']})",
-                  show_header=False)
+    # user text (scenario name, end reason, paths) is never read as console markup
+    table = Table(title=escape(f"{result.model.scenario.name}: {s['status']} "
+                               f"({s['end_reason']})"), show_header=False)
     table.add_column("quantity")
     table.add_column("value", justify="right")
 
@@ -167,9 +169,9 @@ def _print_summary(result, as_json: bool) -> None:
     for key, value in s.items():
         if key in ("status", "end_reason"):
             continue
-        table.add_row(key, fmt(value))
+        table.add_row(key, escape(fmt(value)))
     if result.out_dir is not None:
-        table.add_row("output", str(result.out_dir))
+        table.add_row("output", escape(str(result.out_dir)))
     console.print(table)
 
 
@@ -188,10 +190,22 @@ def validate(
     except ScenarioError as err:
         error(str(err))
         raise typer.Exit(2) from None
-    console.print(f"[green]ok[/]: {sc.name}: {model.nx} x {model.ny} nodes, "
+    console.print(f"[green]ok[/]: {escape(sc.name)}: {model.nx} x {model.ny} nodes, "
                   f"{model.seg_count} yarn segments, projectile: {sc.projectile.shape}")
     if show:
-        emit(sc.to_toml())
+        emit(sc.to_commented_toml())
+
+
+@app.command()
+def new(
+    scenario: Annotated[str, typer.Argument(
+        help="Built-in scenario (see `emfabric scenarios`) or TOML file to start from")
+    ] = "paper-field",
+    set_: Annotated[list[str] | None, typer.Option("--set", help="Override a value")] = None,
+) -> None:
+    """Print a scenario file to start from, every key with its meaning and unit: `emfabric new
+    paper-field > my.toml`, edit, then `emfabric run my.toml`."""
+    emit(_load(scenario, set_).to_commented_toml())
 
 
 @app.command()

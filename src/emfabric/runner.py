@@ -30,6 +30,7 @@ from emfabric.io.checkpoint import (
 from emfabric.io.history import (
     Recorder,
     append_history,
+    fabric_reference,
     history_status,
     read_history_rows,
     run_attributes,
@@ -290,6 +291,7 @@ def summarize(result: RunResult) -> dict[str, float | int | str]:
         "max_stretch": float(ds["max_stretch"].max()),
         "max_deflection_m": float(ds["max_deflection"].max()),
         "energy_balance_error_J": float(ds["energy_balance_error"][-1]),
+        "fabric": fabric_reference(m.scenario),
     }
     if m.has_body:
         v = ds["projectile_velocity"][-1].values

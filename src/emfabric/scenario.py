@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import ast
 import copy
+import json
 import tomllib
 from importlib import resources
 from pathlib import Path
@@ -43,6 +44,7 @@ class _Section(BaseModel):
 
 class Material(_Section):
     model: Literal["kirchhoff-saint-venant", "fung"] = "kirchhoff-saint-venant"
+    """Yarn law: "kirchhoff-saint-venant" (relaxed, eq. 2.4) or "fung" (section 6)."""
     youngs_modulus: PositiveFloat = 126e9
     """Mean Young's modulus of a yarn [Pa] (KSV law)."""
     modulus_cv: NonNegFloat = 0.10
@@ -77,6 +79,7 @@ class Damage(_Section):
 
 class Fabric(_Section):
     nodes: tuple[Annotated[int, Field(ge=2)], Annotated[int, Field(ge=2)]] = (100, 100)
+    """Grid nodes along x and y [-]."""
     size: tuple[PositiveFloat, PositiveFloat] = (0.254, 0.254)
     """Sheet size [m] along x and y."""
     areal_density: PositiveFloat = 0.12784
@@ -86,12 +89,15 @@ class Fabric(_Section):
     charge_per_node: FiniteFloat = 1.0
     """[C]."""
     edges: Literal["clamped", "free"] = "clamped"
+    """Boundary nodes: "clamped" (fixed) or "free"."""
     velocity: FiniteVec3 = (0.0, 0.0, 0.0)
     """Initial velocity of every free node [m/s]."""
-    rescale: bool = False
-    """Run this grid as the same fabric as `reference_nodes`: yarn area scales with spacing
-    (same stiffness per unit width), charge with node mass (same q/m)."""
+    rescale: bool = True
+    """Run this grid as the same fabric as `reference_nodes` on this sheet: yarn area scales
+    with the spacing (same stiffness per unit width), charge with the node mass (same q/m);
+    false: yarn_radius and charge_per_node are taken as they are at this spacing."""
     reference_nodes: tuple[Annotated[int, Field(ge=2)], Annotated[int, Field(ge=2)]] = (100, 100)
+    """Grid on this sheet that yarn_radius and charge_per_node describe (rescale = true) [-]."""
     material: Material = Material()
     damage: Damage = Damage()
 
@@ -105,14 +111,19 @@ class PointCharge(_Section):
 
 class Projectile(_Section):
     shape: Literal["sphere", "none"] = "sphere"
+    """Projectile shape: "sphere", or "none" for the fabric alone."""
     radius: PositiveFloat = 0.02635
+    """Sphere radius [m]."""
     mass: PositiveFloat = 0.037
+    """Projectile mass [kg]."""
     position: FiniteVec3 | None = None
     """Centre of mass [m]; default: lowest point `gap` above the sheet centre."""
     gap: NonNegFloat = 1e-4
     """Initial clearance below the sphere when `position` is not given [m]."""
     velocity: FiniteVec3 = (0.0, 0.0, -250.0)
+    """Initial velocity of the centre of mass [m/s]."""
     angular_velocity: FiniteVec3 = (0.0, 0.0, 0.0)
+    """Initial angular velocity (inertial frame) [rad/s]."""
     principal_inertia: tuple[PositiveFloat, PositiveFloat, PositiveFloat] | None = None
     """Principal moments of inertia [kg m²] along the body axes; default 2/5·m·R² (sphere)."""
     charges: tuple[PointCharge, ...] = ()
@@ -125,6 +136,7 @@ class FieldSpec(_Section):
     B: FiniteVec3 = (0.05, 0.0, 0.0)
     """Magnetic field [T]."""
     region: Literal["uniform", "half-space"] = "uniform"
+    """Where the field acts: "uniform" (everywhere) or "half-space" (z < z0)."""
     z0: FiniteFloat = 0.0
     """With region = "half-space": the field acts where z < z0 [m]."""
     gravity: FiniteVec3 = (0.0, 0.0, 0.0)
@@ -133,7 +145,9 @@ class FieldSpec(_Section):
 
 class Contact(_Section):
     static_friction: NonNegFloat = 1.0
+    """Static friction coefficient μ_s [-]."""
     dynamic_friction: NonNegFloat = 0.95
+    """Dynamic friction coefficient μ_d ≤ μ_s [-]."""
 
     @model_validator(mode="after")
     def _dynamic_not_above_static(self) -> Contact:
@@ -149,15 +163,21 @@ class Solver(_Section):
     scheme: Literal["fixed-point", "anderson"] = "fixed-point"
     """Solver of each φ-step: the paper's fixed-point iteration, or its Anderson acceleration."""
     phi: Annotated[float, Field(ge=0.0, le=1.0)] = 0.5
+    """φ of the φ-scheme (0 explicit, 0.5 trapezoidal, 1 implicit) [-]."""
     tolerance: PositiveFloat = 1e-6
+    """Fixed-point tolerance on the normalised iteration error ϖ (eq. 3.10) [-]."""
     target_iterations: Annotated[int, Field(ge=1, le=1000)] = 6
+    """K_d of eq. 3.9: iterations per step the controller aims at [-]."""
     exponent: PositiveFloat = 2.0
     """p of eq. 3.9."""
     adaptive: bool = True
     """False: fixed Δt = dt_max, iterate to `tolerance` within `max_iterations`."""
     max_iterations: Annotated[int, Field(ge=1, le=100000)] = 200
+    """Iteration limit per step when adaptive = false [-]."""
     dt_max: PositiveFloat = 1e-6
+    """Largest time step [s]."""
     dt_min: PositiveFloat = 1e-13
+    """Smallest time step; below it the run stops as diverged [s]."""
     dt_initial: PositiveFloat | None = None
     """First Δt tried; default dt_max (the paper)."""
     end_time: PositiveFloat = 1.5e-3
@@ -165,6 +185,7 @@ class Solver(_Section):
     safety: Annotated[float, Field(gt=0, le=1)] = 0.9
     """Factor on Φ_K of eq. 3.9; 1.0 is the paper-literal controller."""
     anderson_depth: Annotated[int, Field(ge=1, le=20)] = 5
+    """History depth of scheme = "anderson" [-]."""
 
     @model_validator(mode="after")
     def _dt_order(self) -> Solver:
@@ -190,7 +211,9 @@ class Output(_Section):
 
 class Scenario(_Section):
     name: str = "custom"
+    """Names the run; default output folder runs/<name> (a scenario file: runs/<file name>)."""
     description: str = ""
+    """One line saying what the scenario is."""
     fabric: Fabric = Fabric()
     projectile: Projectile = Projectile()
     field: FieldSpec = FieldSpec()
@@ -215,9 +238,65 @@ class Scenario(_Section):
         """The full scenario as TOML text (every default written out)."""
         return tomli_w.dumps(_tomlable(self.to_dict()))
 
+    def to_commented_toml(self) -> str:
+        """The full scenario as TOML to read and edit: one line per key, arrays on one line, a
+        comment with each key's meaning and unit; keys without a value are shown commented out.
+        Parses back to the same scenario."""
+        return _commented(self)
+
     def replace(self, **dotted: Any) -> Scenario:
         """A copy with dotted-key overrides: ``s.replace(**{"field.B": [0, 0, 0.1]})``."""
         return apply_overrides(self, dotted)
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        return repr(v)
+    if isinstance(v, str):
+        # a TOML basic string: JSON's escapes are TOML's, except DEL, which TOML forbids raw
+        return json.dumps(v, ensure_ascii=False).replace("\x7f", "\\u007f")
+    if isinstance(v, list | tuple):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    raise TypeError(f"no TOML form for {v!r}")
+
+
+def _comment(field: Any) -> str:
+    text = " ".join((field.description or "").split())
+    return f"  # {text}" if text else ""
+
+
+def _section_lines(model: BaseModel, path: str, out: list[str]) -> None:
+    subs = []
+    for name, field in type(model).model_fields.items():
+        value = getattr(model, name)
+        if isinstance(value, BaseModel):
+            subs.append((name, value))
+        elif isinstance(value, tuple) and value and isinstance(value[0], BaseModel):
+            subs.append((name, value))
+        elif value is None:
+            out.append(f"# {name} = (not set){_comment(field)}")
+        elif isinstance(value, tuple) and not value and _model_in(field.annotation):
+            out.append(f"# [[{path}{name}]] (none){_comment(field)}")
+        else:
+            out.append(f"{name} = {_toml_value(value)}{_comment(field)}")
+    for name, value in subs:
+        if isinstance(value, tuple):
+            for item in value:
+                out += ["", f"[[{path}{name}]]"]
+                _section_lines(item, f"{path}{name}.", out)
+        else:
+            out += ["", f"[{path}{name}]"]
+            _section_lines(value, f"{path}{name}.", out)
+
+
+def _commented(scenario: Scenario) -> str:
+    out: list[str] = []
+    _section_lines(scenario, "", out)
+    return "\n".join(out).lstrip("\n") + "\n"
 
 
 def _drop_none(obj: Any) -> Any:

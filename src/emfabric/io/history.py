@@ -82,6 +82,7 @@ def run_attributes(model: Model, status: str, end_reason: str, wall: float) -> d
         "references": REFERENCES,
         "emfabric_version": __version__,
         "scenario_name": sc.name,
+        "fabric_reference": fabric_reference(sc),
         "has_projectile": int(model.has_body),
         "projectile_radius": model.body.radius if model.has_body else 0.0,
         "scenario": sc.to_toml(),
@@ -128,3 +129,16 @@ def history_status(path: Path) -> tuple[str, str] | None:
             return str(nc.getncattr("status")), str(nc.getncattr("end_reason"))
     except (OSError, AttributeError, KeyError):
         return None
+
+
+def fabric_reference(scenario) -> str:
+    """Which fabric the grid runs as (fabric.rescale and reference_nodes), in words."""
+    fab = scenario.fabric
+    grid = f"{fab.nodes[0]} x {fab.nodes[1]}"
+    if not fab.rescale:
+        return f"{grid} as given (rescale = false: yarn_radius and charge_per_node at this spacing)"
+    ref = f"{fab.reference_nodes[0]} x {fab.reference_nodes[1]}"
+    if tuple(fab.nodes) == tuple(fab.reference_nodes):
+        return f"{grid}, the reference grid"
+    return (f"{grid} run as the {ref} reference fabric (yarn area scaled with the spacing, "
+            f"charge with the node mass)")
