@@ -158,3 +158,28 @@ def test_a_coarser_grid_is_the_same_fabric_by_default(tmp_path):
     assert "100 x 100 reference" in xr.open_dataset(tmp_path / "history.nc").attrs[
         "fabric_reference"]
     assert "100 x 100 reference" in res.summary["fabric"]
+
+
+def test_full_disk_stops_the_run_naming_the_file(tmp_path, monkeypatch):
+    """A write that fails (disk full) ends the run as failed with the file's name; what was
+    written before stays readable."""
+    import errno
+
+    import emfabric.runner as runner
+
+    real = runner.append_history
+    calls = []
+
+    def append_then_fill_up(path, rows, attrs, written):
+        calls.append(1)
+        if len(calls) > 1:
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        return real(path, rows, attrs, written)
+
+    monkeypatch.setattr(runner, "append_history", append_then_fill_up)
+    sc = _small(**{"solver.end_time": 300e-6, "output.checkpoint_seconds": 1e-9})
+    with pytest.raises(runner.OutputError, match=r"history\.nc: No space left on device") as info:
+        run(sc, tmp_path)
+    assert info.value.result.status == "failed"
+    ds = xr.open_dataset(tmp_path / "history.nc")
+    assert ds.sizes["time"] >= 2
