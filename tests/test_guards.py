@@ -183,3 +183,15 @@ def test_full_disk_stops_the_run_naming_the_file(tmp_path, monkeypatch):
     assert info.value.result.status == "failed"
     ds = xr.open_dataset(tmp_path / "history.nc")
     assert ds.sizes["time"] >= 2
+
+
+@pytest.mark.parametrize("override, key", [
+    ("projectile.position=[0,0,0]", "projectile.position"),
+    ("fabric.nodes=[100000,100000]", "fabric.nodes"),
+    ("solver.phi=0", "solver.dt_max"),
+    ('fabric.edges="[/x]"', "fabric.edges"),
+])
+def test_cli_refuses_with_exit_code_2(tmp_path, override, key):
+    r = _cli("run", "demo-small", "--set", override, "--out", str(tmp_path / "o"), "-q")
+    assert r.returncode == 2, r.stderr
+    assert key in r.stderr and "Traceback" not in r.stderr

@@ -129,7 +129,8 @@ def run(
             console.print("[yellow]interrupted[/]: the history written so far is marked partial;"
                           f" continue with `emfabric run --resume {escape(str(out_dir))}`",
                           markup=True, highlight=False)
-        except CheckpointError as exc:
+        except (CheckpointError, ScenarioError) as exc:
+            bar.stop()
             error(str(exc))
             raise typer.Exit(2) from None
         except Exception as exc:  # DivergenceError and friends
