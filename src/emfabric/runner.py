@@ -173,6 +173,10 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
     next_checkpoint = 0.0  # the first step is saved at once: a killed run always has files
     first_step = True
     try:
+        if resumed is None:
+            # the initial record on disk before the step kernel compiles (seconds on a cold
+            # cache): a run killed meanwhile still leaves a readable history
+            save("partial", "running (checkpoint)")
         while s_in.t < t_end * (1 - 1e-12):
             info = integ.step(s_in, s_out, dt_limit=t_end - s_in.t)
             s_in, s_out = s_out, s_in
