@@ -129,6 +129,8 @@ def test_checkpoint_round_trips_every_state_field(tmp_path):
             values[f.name] = rng.normal(size=(8, 3))
         elif f.name == "energy":
             values[f.name] = rng.normal(size=6)
+        elif f.name == "contact_force":
+            values[f.name] = rng.normal(size=3)
         elif f.type == "int":
             values[f.name] = int(rng.integers(1, 10**9))
         else:

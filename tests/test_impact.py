@@ -102,3 +102,17 @@ def test_energy_budget_closes_with_the_scheme():
     fine = err(2.5e-8)
     assert coarse < 0.01
     assert fine < coarse
+
+
+def test_contact_force_is_the_momentum_the_fabric_gives():
+    """No field, no gravity: the projectile's momentum changes only by the contact impulses, so
+    Σ contact_force·Δt over the steps equals M (v_end − v_0) (eq. 4.12 with ψ = 0); yaw starts
+    at 0 (the nose marker leads along the velocity) and stays an angle in [0, π]."""
+    ds = run(_patch(21, **{"solver.end_time": 20e-6, "field.B": [0.0, 0.0, 0.0]})).history
+    impulse = (ds.contact_force.values[1:] * ds.dt.values[1:, None]).sum(axis=0)
+    dp = 0.037 * (ds.projectile_velocity.values[-1] - ds.projectile_velocity.values[0])
+    np.testing.assert_allclose(impulse, dp, rtol=1e-9, atol=1e-12 * np.abs(dp).max())
+    assert np.abs(dp).max() > 1e-3  # the sphere was really braked
+    assert ds.attrs and ds.contact_force.attrs["units"] == "N"
+    assert float(ds.yaw[0]) == 0.0
+    assert (ds.yaw.values >= 0).all() and (ds.yaw.values <= np.pi).all()

@@ -50,6 +50,9 @@ RECORD: dict[str, tuple[int, str, str]] = {
     "dissipation_projection": (1, "J", "work lost in contact position projections (cumulative)"),
     "dissipation_damage": (1, "J", "energy released by yarn damage (cumulative)"),
     "energy_balance_error": (1, "J", "kinetic + strain + dissipated − work − initial energy"),
+    "yaw": (1, "rad", "angle between the projectile's axis (nose marker) and its velocity"),
+    "contact_force": (3, "N", "total contact + friction force on the projectile (mean over "
+                              "the step)"),
 }
 COLUMNS = 1 + sum(w for w, _u, _l in RECORD.values())
 """Columns of a history record (time first)."""
@@ -100,7 +103,7 @@ def _record(model: Model, state: State, row: np.ndarray,
     out = _fabric(model, state)
     e0 = _k.history_row(state.t, state.last_dt, state.iterations, state.error, state.rejected,
                         state.evaluations, state.contact_count, state.body, model.body, out,
-                        state.energy, e_initial, row)
+                        state.energy, e_initial, state.contact_force, row)
     return FabricDiagnostics._make(out.tolist()), float(e0)
 
 

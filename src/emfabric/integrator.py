@@ -222,6 +222,7 @@ class Integrator:
         s_out.last_dt = dt
         s_out.contact_count = nc
         s_out.contact_steps = s_in.contact_steps + (1 if nc > 0 else 0)
+        s_out.contact_force[:] = self.work.reaction[0] / dt
         return StepInfo(t=s_out.t, dt=dt, iterations=k, error=err, rejected=rejected,
                         evaluations=evaluations, contacts=nc)
 

@@ -132,6 +132,8 @@ class State:
     """Accepted steps that ended with a node in contact (0: the projectile never touched)."""
     energy: np.ndarray = field(default_factory=lambda: np.zeros(len(ENERGY_TERMS)))
     """Cumulative energy terms [J], see ENERGY_TERMS."""
+    contact_force: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    """Total contact + friction force on the body over the last step, ΣJ/Δt [N]."""
     energy_initial: float = math.nan
     """Total energy of the initial state [J] (reference of the energy balance)."""
 

@@ -7,7 +7,15 @@ from numba import njit
 
 from emfabric._kernels.materials import strain_energy_density, stretch_sq
 from emfabric._kernels.records import BODY_R0, BODY_V, BODY_W, BODY_X
-from emfabric._kernels.vec3 import cross, dot, mat_vec, tilt_angle, vec, world_inertia_times
+from emfabric._kernels.vec3 import (
+    cross,
+    dot,
+    mat_vec,
+    tilt_angle,
+    vec,
+    world_inertia_times,
+    yaw_angle,
+)
 
 # indices of the scalar results
 (KE, PX, PY, PZ, LX, LY, LZ, DEFLECTION, STRETCH, STRAIN, BROKEN, MIN_ALPHA, AHEAD_MIN,
@@ -102,7 +110,7 @@ def fabric_diagnostics(phys, x, v, alpha, centre, direction, out):
 
 @njit(cache=True)
 def history_row(t, dt, iterations, error, rejected, evaluations, contacts, b_state, body, diag,
-                energy, e_initial, row):
+                energy, e_initial, contact_force, row):
     """Write one history record (the column order of emfabric.io.history.VARIABLES) into row.
 
     Returns the record's total energy (kinetic + strain + dissipated − work) [J].
@@ -125,6 +133,7 @@ def history_row(t, dt, iterations, error, rejected, evaluations, contacts, b_sta
     ang = (xp[0] + h[0], xp[1] + h[1], xp[2] + h[2])
     # tilt, eq. 5.2, in atan2 form (accurate at small angles)
     tilt = tilt_angle(rot, nose_body) if has_body else 0.0
+    yaw = yaw_angle(rot, nose_body, v) if has_body else 0.0
     total = (ke_t + ke_r + diag[KE] + diag[STRAIN] + energy[2] + energy[3] + energy[4]
              + energy[5] - energy[0] - energy[1])
     e0 = total if math.isnan(e_initial) else e_initial
@@ -161,4 +170,8 @@ def history_row(t, dt, iterations, error, rejected, evaluations, contacts, b_sta
     for c in range(6):
         row[k + c] = energy[c]
     row[k + 6] = total - e0
+    k += 7
+    row[k] = yaw
+    for c in range(3):
+        row[k + 1 + c] = contact_force[c]
     return e0

@@ -171,6 +171,9 @@ class Work(NamedTuple):
     c_proj: np.ndarray
     """Projection displacement [m]."""
     sum_buf: np.ndarray
+    reaction: np.ndarray
+    """Total contact + friction impulse on the body [N s] and its moment about the centre of
+    mass [N m s] of the last iterate, (2, 3)."""
 
 
 def make_work(nx: int, ny: int) -> Work:
@@ -178,4 +181,4 @@ def make_work(nx: int, ny: int) -> Work:
     return Work(np.empty((3, n)), np.empty((2, ny)), np.empty(n), np.empty(n),
                 np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.uint8),
                 np.empty(n, dtype=np.int64), np.empty((3, n)), np.empty((3, n)),
-                np.empty((3, n)), np.empty(n))
+                np.empty((3, n)), np.empty(n), np.zeros((2, 3)))

@@ -8,7 +8,6 @@ measure ϖ_K. The initial iterate is the start-of-step state (ϖ_0 = 1).
 
 import math
 
-import numpy as np
 from numba import njit
 
 from emfabric._kernels.anderson import anderson_mix
@@ -115,8 +114,11 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
     else:
         flag[:] = 0
 
-    imp_force = np.zeros(3)
-    imp_moment = np.zeros(3)
+    imp_force = work.reaction[0]
+    imp_moment = work.reaction[1]
+    for c in range(3):
+        imp_force[c] = 0.0
+        imp_moment[c] = 0.0
     copy_into(b_out, b_in)
     # iterate K-1 is read from `prev`, iterate K written to `cur`; iterate 0 is x0 (ϖ_0 = 1).
     # Plain fixed point: prev and cur alternate between xbuf and x1. Anderson: cur is always

@@ -141,6 +141,14 @@ def tilt_angle(rot, nose_body):
     return math.atan2(norm(cross(now, nose_body)), dot(now, nose_body))
 
 
+@njit(cache=True, inline="always")
+def yaw_angle(rot, nose_body, v):
+    """Angle between the body axis now (R·n, n the nose marker) and the velocity v [rad], in
+    atan2 form; 0 for a body at rest."""
+    axis = mat_vec(rot, nose_body)
+    return math.atan2(norm(cross(axis, v)), dot(axis, v))
+
+
 @njit(cache=True)
 def copy_into(dst, src):
     """dst[...] = src for 2-D arrays of one shape, as a plain loop: Numba's array assignment

@@ -23,7 +23,8 @@ from emfabric.scenario import Scenario, ScenarioError, scenario_from_dict
 CHECKPOINT = "checkpoint.nc"
 FORMAT = 1
 _DIMS = {"node_x": ("xyz", "node"), "node_v": ("xyz", "node"), "node_f": ("xyz", "node"),
-         "seg_alpha": ("segment",), "body": ("body_row", "xyz"), "energy": ("energy_term",)}
+         "seg_alpha": ("segment",), "body": ("body_row", "xyz"), "energy": ("energy_term",),
+         "contact_force": ("xyz",)}
 
 
 class CheckpointError(RuntimeError):
