@@ -116,3 +116,10 @@ def test_contact_force_is_the_momentum_the_fabric_gives():
     assert ds.attrs and ds.contact_force.attrs["units"] == "N"
     assert float(ds.yaw[0]) == 0.0
     assert (ds.yaw.values >= 0).all() and (ds.yaw.values <= np.pi).all()
+
+
+def test_axis_sets_the_initial_yaw():
+    """projectile.axis gives the nose direction at t = 0: yaw(0) is its angle to the velocity."""
+    ds = run(_patch(11, **{"solver.end_time": 1e-6, "projectile.axis": [1.0, 0.0, -1.0]})).history
+    assert float(ds.yaw[0]) == pytest.approx(np.pi / 4, rel=1e-12)
+    assert float(ds.tilt[0]) == 0.0

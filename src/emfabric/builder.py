@@ -130,6 +130,13 @@ def build_model(scenario: Scenario) -> Model:
     speed = np.linalg.norm(body_v0)
     # the nose: the surface point that initially leads along the velocity (tilt marker, 5.2)
     lead = body_v0 / speed if speed > 0 else np.array([0.0, 0.0, -1.0])
+    if pr.axis is not None:
+        axis = np.asarray(pr.axis, dtype=float)
+        length = float(np.linalg.norm(axis))
+        if not length > 0.0:
+            raise ScenarioError(f"projectile.axis = {list(pr.axis)}: the nose direction must "
+                                f"be a non-zero vector")
+        lead = axis / length
     charge_pos = np.array([c.position for c in pr.charges], dtype=float).reshape(-1, 3)
     charge_q = np.array([c.charge for c in pr.charges], dtype=float)
 

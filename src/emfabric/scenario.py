@@ -122,6 +122,9 @@ class Projectile(_Section):
     """Initial clearance below the sphere when `position` is not given [m]."""
     velocity: FiniteVec3 = (0.0, 0.0, -250.0)
     """Initial velocity of the centre of mass [m/s]."""
+    axis: FiniteVec3 | None = None
+    """Nose direction in the world frame at t = 0 (the tilt and yaw marker); default: along
+    the velocity."""
     angular_velocity: FiniteVec3 = (0.0, 0.0, 0.0)
     """Initial angular velocity (inertial frame) [rad/s]."""
     principal_inertia: tuple[PositiveFloat, PositiveFloat, PositiveFloat] | None = None
