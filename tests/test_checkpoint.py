@@ -182,3 +182,15 @@ def test_history_is_appended_along_an_unlimited_time(tmp_path):
         with netCDF4.Dataset(tmp_path / name) as nc:
             assert nc.dimensions[dim].isunlimited()
             assert nc.file_format == "NETCDF3_64BIT_OFFSET"
+
+
+def test_cli_resume_with_overrides_only(tmp_path):
+    """`--resume DIR --set k=v` changes the stored scenario, so it is refused naming the key;
+    an override that changes nothing is accepted."""
+    interrupted_demo(tmp_path, SMALL, after=20)
+    r = subprocess.run([sys.executable, "-m", "emfabric", "run", "--resume", str(tmp_path),
+                        "--set", "field.B=[0,0,0.1]", "-q"], capture_output=True, text=True)
+    assert r.returncode == 2 and "field.B" in r.stderr and "Traceback" not in r.stderr
+    r = subprocess.run([sys.executable, "-m", "emfabric", "run", "--resume", str(tmp_path),
+                        "--set", "solver.end_time=0.0003", "-q"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr

@@ -15,7 +15,13 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 from rich.table import Table
 
 from emfabric.cli_app import app, console, emit, error, out_console, show_messages
-from emfabric.scenario import ScenarioError, builtin_names, load_scenario, parse_override
+from emfabric.scenario import (
+    ScenarioError,
+    apply_overrides,
+    builtin_names,
+    load_scenario,
+    parse_override,
+)
 
 
 def _load(scenario: str, overrides: list[str] | None):
@@ -59,12 +65,20 @@ def run(
             error(f"--out {out} and --resume {resume} name different folders; a resumed run "
                   f"writes into the folder it resumes")
             raise typer.Exit(2)
-        given = _load(scenario, set_) if scenario is not None or set_ else None
         try:
             sc = read_checkpoint(resume / CHECKPOINT)[0]
         except CheckpointError as err:
             error(str(err))
             raise typer.Exit(2) from None
+        given = None
+        if scenario is not None:
+            given = _load(scenario, set_)
+        elif set_:  # overrides of the stored scenario: refused below unless they change nothing
+            try:
+                given = apply_overrides(sc, dict(parse_override(o) for o in set_))
+            except ScenarioError as err:
+                error(str(err))
+                raise typer.Exit(2) from None
         out_dir = resume
 
         def start(progress_fn):
