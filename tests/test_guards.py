@@ -195,3 +195,23 @@ def test_cli_refuses_with_exit_code_2(tmp_path, override, key):
     r = _cli("run", "demo-small", "--set", override, "--out", str(tmp_path / "o"), "-q")
     assert r.returncode == 2, r.stderr
     assert key in r.stderr and "Traceback" not in r.stderr
+
+
+def test_sigkill_while_compiling_leaves_a_readable_history(tmp_path):
+    """A run killed before its first step (kernels still compiling in a cold cache) leaves a
+    readable history that says it did not finish."""
+    out = tmp_path / "k"
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "cold-cache"))
+    proc = subprocess.Popen([sys.executable, "-m", "emfabric", "run", "demo-small", "--out",
+                             str(out), "-q"], env=env, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 120
+    while proc.poll() is None and time.monotonic() < deadline:
+        if (out / "history.nc").exists():
+            os.kill(proc.pid, signal.SIGKILL)
+            break
+        time.sleep(0.005)
+    proc.wait()
+    assert proc.returncode == -signal.SIGKILL
+    ds = xr.open_dataset(out / "history.nc")
+    assert ds.attrs["status"] == "partial" and ds.attrs["scenario_name"] == "demo-small"

@@ -120,6 +120,11 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
     t_end = end_time if end_time is not None else scenario.solver.end_time
     interval = scenario.output.snapshot_interval
     if resumed is None:
+        if out is not None:
+            # a readable (empty) history before anything compiles: killed at any moment, the
+            # folder says what was run and that it did not finish
+            write_history(Recorder().to_dataset(run_attributes(model, "partial", "starting",
+                                                               0.0)), out / "history.nc")
         s_in = initial_state(model)
         recorder = Recorder()
         snaps = Snapshots(model, out)
