@@ -165,7 +165,7 @@ def iterate_args(integ, s, s2, dt: float) -> tuple:
     work = integ.work
     work.xbuf[:] = s.node_x
     return (integ.physics, work.xbuf, s.arrays, work.flag, s2.node_x, s2.node_v, s2.node_f,
-            s2.seg_alpha, work, integ.rowbuf, integ.threads, s.t + dt, integ.phi, dt)
+            s2.seg_alpha, work, integ.rowbuf, integ.threads, s.t + dt, integ.solver.phi, dt)
 
 
 @functools.cache
@@ -250,7 +250,7 @@ def bench_evaluation(n: int, threads: list[int], repeats: int, use_warp: bool) -
                                                 yr.inv_rest2),
                                (mt.kind, mt.fung_h, mt.critical_stretch, mt.damage_rate),
                                (fd.E, fd.B, fd.region, fd.z0, fd.gravity), xbuf, s.node_x,
-                               s.node_v, s.node_f, s.seg_alpha, flag, integ.phi, DT)
+                               s.node_v, s.node_f, s.seg_alpha, flag, integ.solver.phi, DT)
         ev.evaluate()
         theirs = ev.results()
         ours = {"alpha_t": s2.seg_alpha, "x1": s2.node_x, "v1": s2.node_v,

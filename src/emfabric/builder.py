@@ -7,6 +7,9 @@ import os
 import numpy as np
 
 from emfabric._kernels.records import (
+    BODY_R0,
+    BODY_ROWS,
+    BODY_X,
     MATERIAL_FUNG,
     MATERIAL_KSV,
     REGION_HALF_SPACE,
@@ -17,6 +20,7 @@ from emfabric._kernels.records import (
     Field,
     Material,
     Nodes,
+    Physics,
     Yarns,
 )
 from emfabric._kernels.shapes import SHAPES
@@ -128,8 +132,10 @@ def build_model(scenario: Scenario) -> Model:
         body_x0 = np.asarray(pr.position, dtype=float)
     body_v0 = np.asarray(pr.velocity, dtype=float)
     speed = np.linalg.norm(body_v0)
-    # the nose: the surface point that initially leads along the velocity (tilt marker, 5.2)
-    lead = body_v0 / speed if speed > 0 else np.array([0.0, 0.0, -1.0])
+    flight = body_v0 / speed if speed > 0 else np.array([0.0, 0.0, -1.0])
+    # the nose: the surface point that initially leads along the axis (default: the flight
+    # direction; tilt and yaw marker, 5.2)
+    lead = flight
     if pr.axis is not None:
         axis = np.asarray(pr.axis, dtype=float)
         length = float(np.linalg.norm(axis))
@@ -141,8 +147,7 @@ def build_model(scenario: Scenario) -> Model:
     charge_q = np.array([c.charge for c in pr.charges], dtype=float)
 
     fld = scenario.field
-    model = Model(
-        scenario=scenario,
+    physics = Physics(
         nodes=Nodes(nx, ny, node_x0, node_mass, node_inv_mass, node_charge),
         yarns=Yarns(
             ends=seg_nodes,
@@ -178,6 +183,11 @@ def build_model(scenario: Scenario) -> Model:
         ),
         contact=Contact(float(scenario.contact.static_friction),
                         float(scenario.contact.dynamic_friction)),
+    )
+    model = Model(
+        scenario=scenario,
+        physics=physics,
+        flight_direction=flight,
         body_x0=body_x0,
         body_v0=body_v0,
         body_w0=np.asarray(pr.angular_velocity, dtype=float),
@@ -196,9 +206,9 @@ def check_geometry(model: Model) -> None:
         return
     from emfabric._kernels.step import _nodes_inside
 
-    state = np.zeros((8, 3))
-    state[0] = model.body_x0
-    state[5:8] = np.eye(3)
+    state = np.zeros((BODY_ROWS, 3))
+    state[BODY_X] = model.body_x0
+    state[BODY_R0:BODY_R0 + 3] = np.eye(3)
     n = model.node_count
     inside = _nodes_inside(model.nodes.x0, np.ones(n), np.zeros(n, dtype=np.uint8), model.body,
                            state)

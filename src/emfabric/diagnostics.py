@@ -13,7 +13,6 @@ from typing import NamedTuple
 import numpy as np
 
 from emfabric._kernels import diagnostics as _k
-from emfabric._kernels.vec3 import tilt_angle
 from emfabric.model import Model, State
 
 # the history record: name -> (width, units, long name); width 3 means a (time, xyz) variable;
@@ -85,22 +84,12 @@ class FabricDiagnostics(NamedTuple):
     """Fastest node speed along the flight direction [m/s]."""
 
 
-def _fabric(model: Model, state: State) -> np.ndarray:
+def _record(model: Model, state: State, row: np.ndarray,
+            e_initial: float) -> tuple[FabricDiagnostics, float]:
     out = np.empty(_k.COUNT)
     centre = state.body_x if model.has_body else np.zeros(3)
     _k.fabric_diagnostics(model.physics, state.node_x, state.node_v, state.seg_alpha, centre,
                           model.flight_direction, out)
-    return out
-
-
-def fabric(model: Model, state: State) -> FabricDiagnostics:
-    """Energy, momenta, deflection, stretch, damage and extent of the fabric in one pass."""
-    return FabricDiagnostics._make(_fabric(model, state).tolist())
-
-
-def _record(model: Model, state: State, row: np.ndarray,
-            e_initial: float) -> tuple[FabricDiagnostics, float]:
-    out = _fabric(model, state)
     e0 = _k.history_row(state.t, state.last_dt, state.iterations, state.error, state.rejected,
                         state.evaluations, state.contact_count, state.body, model.body, out,
                         state.energy, e_initial, state.contact_force, row)
@@ -116,11 +105,6 @@ def measure(model: Model, state: State, row: np.ndarray) -> FabricDiagnostics:
 def total_energy(model: Model, state: State) -> float:
     """Kinetic + strain energy + dissipated − work so far [J] (the energy balance's total)."""
     return _record(model, state, np.empty(COLUMNS), math.nan)[1]
-
-
-def tilt(model: Model, state: State) -> float:
-    """Tilt angle Θ of eq. 5.2 [rad]: angle between the nose marker now and at t = 0."""
-    return float(tilt_angle(state.body_rotation, model.body.nose))
 
 
 def left_for_good(model: Model, state: State, fab: FabricDiagnostics) -> str | None:

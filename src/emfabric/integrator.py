@@ -90,10 +90,9 @@ class Integrator:
             depth = solver.anderson_depth
             self.accel = (np.empty((3, n)), np.empty((depth, 3, n)), np.empty((depth, 3, n)),
                           np.empty((3, n)), np.empty((3, n)), np.zeros((depth, depth)))
-        self.phi = solver.phi
-        self.tol = solver.tolerance
-        self.k_target = solver.target_iterations if solver.adaptive else solver.max_iterations
-        self.solver = Solver(float(solver.phi), float(solver.tolerance), int(self.k_target))
+        # K_d of eq. 3.9 and the iteration limit of one attempt
+        k_target = solver.target_iterations if solver.adaptive else solver.max_iterations
+        self.solver = Solver(float(solver.phi), float(solver.tolerance), int(k_target))
         self.p = solver.exponent
         self.safety = solver.safety
         self.adaptive = solver.adaptive
@@ -178,6 +177,7 @@ class Integrator:
                 mark_compiled(self.variant(True))
                 self._use_threads(True)
         dt = min(s_in.dt, dt_limit)
+        tol, k_d = self.solver.tolerance, self.solver.iteration_limit
         rejected = 0
         evaluations = 0
         while True:
@@ -188,9 +188,9 @@ class Integrator:
                 break
             if not self.adaptive:
                 self._fail(s_in, dt, f"no convergence in {k} iterations at fixed Δt "
-                           f"(ϖ = {err:.3g} > tolerance {self.tol:g}); lower solver.dt_max")
+                           f"(ϖ = {err:.3g} > tolerance {tol:g}); lower solver.dt_max")
             if status == NOT_CONVERGED:
-                factor = self.safety * step_factor(err, k, self.tol, self.k_target, self.p)
+                factor = self.safety * step_factor(err, k, tol, k_d, self.p)
                 factor = min(factor, 0.9)
             elif status == CONTACT_MISSED:
                 factor = 0.5
@@ -206,13 +206,13 @@ class Integrator:
         # accept: time advances by the step just taken
         s_out.t = s_in.t + dt
         if self.adaptive:
-            grow = self.safety * step_factor(err, k, self.tol, self.k_target, self.p)
+            grow = self.safety * step_factor(err, k, tol, k_d, self.p)
             s_out.dt = min(self.dt_max, dt * grow)
         else:
             s_out.dt = s_in.dt
         s_out.energy[:] = s_in.energy
-        step_energy(self.physics, s_in.arrays, s_out.arrays, nc, self.work, s_in.t, self.phi, dt,
-                    s_out.energy)
+        step_energy(self.physics, s_in.arrays, s_out.arrays, nc, self.work, s_in.t,
+                    self.solver.phi, dt, s_out.energy)
         s_out.energy_initial = s_in.energy_initial
         s_out.steps = s_in.steps + 1
         s_out.rejected = s_in.rejected + rejected

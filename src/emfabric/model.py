@@ -34,12 +34,10 @@ class Model:
     """Everything a step only reads, as named records, and the scenario it was built from."""
 
     scenario: Scenario
-    nodes: Nodes
-    yarns: Yarns
-    material: Material
-    field: Field
-    body: Body
-    contact: Contact
+    physics: Physics
+    """The records the kernels take (nodes, yarns, material, field, body, contact)."""
+    flight_direction: np.ndarray = field(repr=False)
+    """Unit vector of the projectile's initial velocity (−z if it starts at rest)."""
     body_x0: np.ndarray = field(repr=False)
     """Initial centre of mass [m]."""
     body_v0: np.ndarray = field(repr=False)
@@ -47,10 +45,28 @@ class Model:
     node_v0: np.ndarray = field(repr=False)
 
     @property
-    def physics(self) -> Physics:
-        """The record the kernels take."""
-        return Physics(self.nodes, self.yarns, self.material, self.field, self.body,
-                       self.contact)
+    def nodes(self) -> Nodes:
+        return self.physics.nodes
+
+    @property
+    def yarns(self) -> Yarns:
+        return self.physics.yarns
+
+    @property
+    def material(self) -> Material:
+        return self.physics.material
+
+    @property
+    def field(self) -> Field:
+        return self.physics.field
+
+    @property
+    def body(self) -> Body:
+        return self.physics.body
+
+    @property
+    def contact(self) -> Contact:
+        return self.physics.contact
 
     @property
     def nx(self) -> int:
@@ -76,12 +92,6 @@ class Model:
     def has_body(self) -> bool:
         return bool(self.body.active)
 
-    @property
-    def flight_direction(self) -> np.ndarray:
-        """Unit vector of the projectile's initial velocity (−z if it starts at rest)."""
-        v = self.body_v0
-        speed = float(np.linalg.norm(v))
-        return v / speed if speed > 0 else np.array([0.0, 0.0, -1.0])
 
 
 # cumulative energy terms [J], in the order of State.energy

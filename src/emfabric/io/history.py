@@ -120,13 +120,14 @@ def read_history_rows(path: Path, count: int) -> np.ndarray:
     return rows
 
 
-def history_status(path: Path) -> tuple[str, str] | None:
-    """(status, end_reason) of a history.nc, or None if it cannot be read."""
+def history_status(path: Path) -> tuple[str, str, str] | None:
+    """(status, end_reason, scenario_name) of a history.nc, or None if it cannot be read."""
     import netCDF4
 
     try:
         with netCDF4.Dataset(path, "r") as nc:
-            return str(nc.getncattr("status")), str(nc.getncattr("end_reason"))
+            return tuple(str(nc.getncattr(k)) for k in ("status", "end_reason",
+                                                        "scenario_name"))
     except (OSError, AttributeError, KeyError):
         return None
 

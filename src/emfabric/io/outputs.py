@@ -18,16 +18,9 @@ def run_in(folder: Path) -> str | None:
     from emfabric.io.history import history_status
 
     status = history_status(folder / "history.nc")
-    name = None
-    try:
-        import netCDF4
-
-        with netCDF4.Dataset(folder / "history.nc") as nc:
-            name = str(nc.getncattr("scenario_name"))
-    except (OSError, AttributeError):
-        pass
-    parts = [f"scenario {name!r}" if name else "a run", status[0] if status else "unreadable"]
-    return ", ".join(parts)
+    if status is None:
+        return "a run whose history.nc cannot be read"
+    return f"scenario {status[2]!r}, {status[0]}"
 
 
 def clear_run(folder: Path) -> None:

@@ -13,6 +13,7 @@ import meshio
 import numpy as np
 import xarray as xr
 
+from emfabric._kernels.records import BODY_R0, BODY_ROWS, BODY_V, BODY_W, BODY_X
 from emfabric.io.atomic import write_atomic
 from emfabric.io.netcdf import (
     TIME_ATTRS,
@@ -54,7 +55,7 @@ class Snapshots:
         m = self.model
         times = np.array([p[0] for p in self._pending])
         x, v, alpha, body = (np.array([p[k] for p in self._pending]) for k in (1, 2, 3, 4))
-        body = body.reshape(-1, 8, 3)
+        body = body.reshape(-1, BODY_ROWS, 3)
         return xr.Dataset(
             {
                 "node_position": (("snapshot", "node", "xyz"), x,
@@ -63,15 +64,16 @@ class Snapshots:
                                   {"units": "m s-1", "long_name": "node velocity"}),
                 "yarn_damage": (("snapshot", "segment"), alpha,
                                 {"units": "1", "long_name": "yarn damage α (1 intact, 0 broken)"}),
-                "projectile_position": (("snapshot", "xyz"), body[:, 0],
+                "projectile_position": (("snapshot", "xyz"), body[:, BODY_X],
                                         {"units": "m", "long_name": "projectile centre of mass"}),
-                "projectile_velocity": (("snapshot", "xyz"), body[:, 1],
+                "projectile_velocity": (("snapshot", "xyz"), body[:, BODY_V],
                                         {"units": "m s-1",
                                          "long_name": "projectile centre-of-mass velocity"}),
-                "angular_velocity": (("snapshot", "xyz"), body[:, 2],
+                "angular_velocity": (("snapshot", "xyz"), body[:, BODY_W],
                                      {"units": "rad s-1", "long_name":
                                       "projectile angular velocity (inertial frame)"}),
-                "projectile_rotation": (("snapshot", "xyz", "body_axis"), body[:, 5:8],
+                "projectile_rotation": (("snapshot", "xyz", "body_axis"),
+                                        body[:, BODY_R0:BODY_R0 + 3],
                                         {"units": "1",
                                          "long_name": "rotation matrix body -> inertial frame"}),
                 "segment_nodes": (("segment", "end"), m.yarns.ends,
@@ -126,14 +128,14 @@ class Snapshots:
             tmp, mesh, file_format="vtu", binary=True, compression=None))
         if self._sphere is not None:
             pts, tris = self._sphere
-            rot = b[5:8]
+            rot = b[BODY_R0:BODY_R0 + 3]
             nose = rot @ m.body.nose
-            world = pts @ rot.T + b[0]
+            world = pts @ rot.T + b[BODY_X]
             along = (pts @ (m.body.nose / np.linalg.norm(m.body.nose))) / m.body.radius
             body_mesh = meshio.Mesh(
                 points=world, cells=[("triangle", tris)],
                 point_data={"nose_alignment": along,
-                            "velocity": np.tile(b[1], (len(pts), 1))},
+                            "velocity": np.tile(b[BODY_V], (len(pts), 1))},
                 field_data={"nose": nose},
             )
             write_atomic(folder / f"projectile_{k:05d}.vtu", lambda tmp: meshio.write(
