@@ -35,7 +35,7 @@ def _contact(x_node, v_node, centre=(0, 0, 0), vel=(0, 0, 0), omega=(0, 0, 0), m
     work = make_work(1, 1)
     work.cand[0] = 0
     work.err_rows[:] = 0.0
-    nc = node_contact(nodes, body, Contact(mu_s, mu_d), state, 1, x0, x0, x1, v1, work)
+    nc = node_contact(nodes, body, Contact(mu_s, mu_d), state, 1, x1, v1, work)
     f = np.zeros(3)
     m = np.zeros(3)
     _reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, f, m)

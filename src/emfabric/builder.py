@@ -24,6 +24,7 @@ from emfabric._kernels.records import (
     Yarns,
 )
 from emfabric._kernels.shapes import SHAPES
+from emfabric.geometry import geometry_of, shape_frame
 from emfabric.model import Model
 from emfabric.scenario import Scenario, ScenarioError
 
@@ -121,20 +122,12 @@ def build_model(scenario: Scenario) -> Model:
 
     pr = scenario.projectile
     has_body = pr.shape in SHAPES
-    radius = pr.radius
-    if pr.principal_inertia is None:
-        inertia = np.eye(3) * (0.4 * pr.mass * radius**2)
-    else:
-        inertia = np.diag(np.asarray(pr.principal_inertia, dtype=float))
-    if pr.position is None:
-        body_x0 = np.array([0.0, 0.0, radius + pr.gap])
-    else:
-        body_x0 = np.asarray(pr.position, dtype=float)
+    geo = geometry_of(pr)
     body_v0 = np.asarray(pr.velocity, dtype=float)
     speed = np.linalg.norm(body_v0)
     flight = body_v0 / speed if speed > 0 else np.array([0.0, 0.0, -1.0])
-    # the nose: the surface point that initially leads along the axis (default: the flight
-    # direction; tilt and yaw marker, 5.2)
+    # the nose: the shape's axis at t = 0 (default: the flight direction); its leading surface
+    # point is the tilt and yaw marker (5.2)
     lead = flight
     if pr.axis is not None:
         axis = np.asarray(pr.axis, dtype=float)
@@ -143,8 +136,26 @@ def build_model(scenario: Scenario) -> Model:
             raise ScenarioError(f"projectile.axis = {list(pr.axis)}: the nose direction must "
                                 f"be a non-zero vector")
         lead = axis / length
+    # the body frame is the world frame at t = 0; the shape frame has e3 along the nose
+    frame = np.eye(3) if geo.kind == "sphere" else shape_frame(lead)
+    moments = (geo.principal_inertia(pr.mass) if pr.principal_inertia is None
+               else np.asarray(pr.principal_inertia, dtype=float))
+    inertia = frame.T @ np.diag(moments) @ frame
+    if geo.kind == "sphere":
+        nose = geo.radius * lead
+        lowest = geo.radius
+    else:
+        nose = (geo.length - geo.base) * lead
+        lowest = geo.extent(frame @ np.array([0.0, 0.0, -1.0]))
+    if pr.position is None:
+        body_x0 = np.array([0.0, 0.0, lowest + pr.gap])
+    else:
+        body_x0 = np.asarray(pr.position, dtype=float)
     charge_pos = np.array([c.position for c in pr.charges], dtype=float).reshape(-1, 3)
     charge_q = np.array([c.charge for c in pr.charges], dtype=float)
+    segments = scenario.contact.segments
+    if segments == "auto":
+        segments = geo.kind != "sphere"
 
     fld = scenario.field
     physics = Physics(
@@ -174,19 +185,29 @@ def build_model(scenario: Scenario) -> Model:
         body=Body(
             active=has_body,
             shape=SHAPES.get(pr.shape, SHAPE_SPHERE),  # "none": no body, shape unused
-            radius=float(radius),
+            radius=float(geo.radius),
             mass=float(pr.mass),
             inertia=inertia,
             charge_pos=charge_pos,
             charge=charge_q,
-            nose=radius * lead,
+            nose=nose,
+            length=float(geo.length),
+            nose_length=float(geo.nose_length),
+            base=float(geo.base),
+            arc_radius=float(geo.arc_radius),
+            flat_half_width=float(geo.flat_half_width),
+            bevel_cos=float(np.cos(geo.bevel)),
+            bevel_sin=float(np.sin(geo.bevel)),
+            frame=frame,
+            bound=float(geo.bound),
         ),
         contact=Contact(float(scenario.contact.static_friction),
-                        float(scenario.contact.dynamic_friction)),
+                        float(scenario.contact.dynamic_friction), bool(segments)),
     )
     model = Model(
         scenario=scenario,
         physics=physics,
+        geometry=geo,
         flight_direction=flight,
         body_x0=body_x0,
         body_v0=body_v0,
@@ -213,18 +234,24 @@ def check_geometry(model: Model) -> None:
     inside = _nodes_inside(model.nodes.x0, np.ones(n), np.zeros(n, dtype=np.uint8), model.body,
                            state)
     x0 = model.nodes.x0
-    reach = model.body.radius  # bounding radius of the sphere
+    geo = model.geometry
+    frame = model.body.frame
+    # the body's extent below and above its centre (z), and its reach sideways
+    below = geo.extent(frame @ np.array([0.0, 0.0, -1.0]))
+    above = geo.extent(frame @ np.array([0.0, 0.0, 1.0]))
+    reach = geo.bound
     c = model.body_x0
-    plane_cut = (abs(c[2]) < reach and x0[0].min() - reach < c[0] < x0[0].max() + reach
+    plane_cut = (c[2] - below < 0.0 < c[2] + above
+                 and x0[0].min() - reach < c[0] < x0[0].max() + reach
                  and x0[1].min() - reach < c[1] < x0[1].max() + reach)
     if inside or plane_cut:
         sc = model.scenario.projectile
         where = (f"projectile.position = {list(sc.position)}" if sc.position is not None else
                  f"projectile.gap = {sc.gap}")
         raise ScenarioError(
-            f"{where}: the projectile (centre {[round(float(v), 6) for v in c]} m, radius "
-            f"{reach} m) overlaps the fabric at t = 0 ({inside} nodes inside it); allowed: a "
-            f"start clear of the sheet, e.g. centre z ≥ radius + gap above it"
+            f"{where}: the projectile (centre {[round(float(v), 6) for v in c]} m, reaching "
+            f"{below:.6g} m below it) overlaps the fabric at t = 0 ({inside} nodes inside it); "
+            f"allowed: a start clear of the sheet, e.g. centre z ≥ {below:.6g} m + gap above it"
         )
 
 

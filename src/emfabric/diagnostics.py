@@ -113,7 +113,7 @@ def left_for_good(model: Model, state: State, fab: FabricDiagnostics) -> str | N
     if not model.has_body or state.contact_count > 0:
         return None
     vb = float(state.body_v @ model.flight_direction)
-    clear = 1.05 * model.body.radius
+    clear = 1.05 * model.geometry.bound
     if vb < 0 and fab.ahead_min > clear and fab.approach_max < -vb:
         return "rebound" if state.contact_steps else "never touched"
     if vb > 0 and fab.ahead_max < -clear and fab.recede_max < vb:
@@ -148,11 +148,11 @@ def limits(model: Model) -> Limits:
     # longitudinal wave speed of the yarn network, L0·sqrt(k/m), the fastest a disturbance runs
     m = float(nodes.mass[free].min()) if free.any() else float(nodes.mass.min())
     wave = float((yarns.rest_length * np.sqrt(yarns.stiffness / m)).max())
-    spin = float(np.linalg.norm(model.body_w0)) * model.body.radius if model.has_body else 0.0
+    spin = float(np.linalg.norm(model.body_w0)) * model.geometry.bound if model.has_body else 0.0
     fastest = max(wave, float(np.linalg.norm(model.body_v0)), spin,
                   float(np.abs(model.node_v0).max(initial=0.0)) * 3 ** 0.5)
     size = float(np.abs(nodes.x0).max()) + float(np.linalg.norm(model.body_x0)) \
-        + model.body.radius
+        + model.geometry.bound
     return Limits(SPEED_FACTOR * fastest, SIZE_FACTOR * size)
 
 

@@ -82,7 +82,7 @@ class Integrator:
         self._deferred = False  # serial until the threaded kernel is compiled
         self._background: threading.Thread | None = None
         self._background_ok = False
-        self.work = make_work(model.nx, model.ny)
+        self.work = make_work(model.nx, model.ny, model.seg_count)
         solver = sc.solver
         # None for the plain fixed point: the step kernel is then compiled without Anderson
         self.accel = None

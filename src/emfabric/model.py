@@ -26,6 +26,7 @@ from emfabric._kernels.records import (
     StateArrays,
     Yarns,
 )
+from emfabric.geometry import ShapeGeometry
 from emfabric.scenario import Scenario
 
 
@@ -36,6 +37,8 @@ class Model:
     scenario: Scenario
     physics: Physics
     """The records the kernels take (nodes, yarns, material, field, body, contact)."""
+    geometry: ShapeGeometry = field(repr=False)
+    """The projectile's shape and dimensions (volume, inertia, surface mesh)."""
     flight_direction: np.ndarray = field(repr=False)
     """Unit vector of the projectile's initial velocity (−z if it starts at rest)."""
     body_x0: np.ndarray = field(repr=False)

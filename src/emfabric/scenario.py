@@ -110,27 +110,55 @@ class PointCharge(_Section):
 
 
 class Projectile(_Section):
-    shape: Literal["sphere", "none"] = "sphere"
-    """Projectile shape: "sphere", or "none" for the fabric alone."""
+    shape: Literal["sphere", "ogive", "cylinder", "fsp", "none"] = "sphere"
+    """Projectile shape: "sphere"; "ogive" (tangent-ogive nose on a cylinder, flat base);
+    "cylinder" (right circular, flat faces); "fsp" (fragment-simulating projectile: cylinder
+    with a chisel nose, proportions from the calibre); or "none" for the fabric alone."""
     radius: PositiveFloat = 0.02635
-    """Sphere radius [m]."""
+    """Sphere radius, or the body radius (calibre/2) of the other shapes [m]."""
+    length: PositiveFloat | None = None
+    """Overall length [m]: needed for "ogive" and "cylinder"; "fsp" default 1.16 × calibre."""
+    nose_length: PositiveFloat | None = None
+    """Ogive nose length [m], from radius (hemispherical nose) to length (all nose)."""
     mass: PositiveFloat = 0.037
-    """Projectile mass [kg]."""
+    """Projectile mass [kg] (uniform density: the inertia follows from the shape)."""
     position: FiniteVec3 | None = None
     """Centre of mass [m]; default: lowest point `gap` above the sheet centre."""
     gap: NonNegFloat = 1e-4
-    """Initial clearance below the sphere when `position` is not given [m]."""
+    """Initial clearance below the projectile when `position` is not given [m]."""
     velocity: FiniteVec3 = (0.0, 0.0, -250.0)
     """Initial velocity of the centre of mass [m/s]."""
     axis: FiniteVec3 | None = None
-    """Nose direction in the world frame at t = 0 (the tilt and yaw marker); default: along
-    the velocity."""
+    """Nose direction in the world frame at t = 0 (the shape's axis, and the tilt and yaw
+    marker); default: along the velocity."""
     angular_velocity: FiniteVec3 = (0.0, 0.0, 0.0)
     """Initial angular velocity (inertial frame) [rad/s]."""
     principal_inertia: tuple[PositiveFloat, PositiveFloat, PositiveFloat] | None = None
-    """Principal moments of inertia [kg m²] along the body axes; default 2/5·m·R² (sphere)."""
+    """Principal moments of inertia [kg m²]; default: the shape's at uniform density. Sphere:
+    about the world x, y, z axes; other shapes: about e1, e2 and the nose axis e3 (e1: world
+    x made perpendicular to the axis, world y when the nose points along ±x; e2 = e3 × e1)."""
     charges: tuple[PointCharge, ...] = ()
     """Charged points fixed on the body (section 6)."""
+
+    @model_validator(mode="after")
+    def _dimensions(self) -> Projectile:
+        if self.shape in ("ogive", "cylinder") and self.length is None:
+            raise ValueError(f'shape = "{self.shape}" needs length (the overall length [m])')
+        if self.shape == "ogive":
+            if self.nose_length is None:
+                raise ValueError('shape = "ogive" needs nose_length (the ogive nose length [m])')
+            if not self.radius <= self.nose_length <= self.length:
+                raise ValueError(
+                    f"nose_length = {self.nose_length} must lie in [radius, length] = "
+                    f"[{self.radius}, {self.length}] (a tangent ogive shorter than the radius "
+                    f"does not close to a point)")
+        elif self.nose_length is not None:
+            raise ValueError(f'nose_length = {self.nose_length} is only for shape = "ogive" '
+                             f'(shape = "{self.shape}")')
+        if self.shape == "sphere" and self.length is not None:
+            raise ValueError(f'length = {self.length} is not used by shape = "sphere"; allowed '
+                             f'with "ogive", "cylinder", "fsp"')
+        return self
 
 
 class FieldSpec(_Section):
@@ -151,6 +179,10 @@ class Contact(_Section):
     """Static friction coefficient μ_s [-]."""
     dynamic_friction: NonNegFloat = 0.95
     """Dynamic friction coefficient μ_d ≤ μ_s [-]."""
+    segments: Literal["auto"] | bool = "auto"
+    """Also resolve contact of the yarn segments between the nodes (true), or of the nodes
+    only (false, the paper's model); "auto": nodes only for the sphere, nodes and segments for
+    the other shapes (a pointed nose can pass between nodes)."""
 
     @model_validator(mode="after")
     def _dynamic_not_above_static(self) -> Contact:

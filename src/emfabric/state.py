@@ -53,7 +53,7 @@ def update_forces(model: Model, state: State) -> None:
     m = model
     n = m.node_count
     scratch = state.copy()
-    work = make_work(m.nx, m.ny)
+    work = make_work(m.nx, m.ny, m.seg_count)
     fused_iterate(m.nodes, m.yarns, m.material, m.field, state.node_x, state.node_x,
                   state.node_v, np.zeros_like(state.node_f), state.seg_alpha, scratch.seg_alpha,
                   scratch.node_x, scratch.node_v, state.node_f, np.ones(n, dtype=np.uint8),

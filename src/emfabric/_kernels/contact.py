@@ -14,7 +14,7 @@ import math
 from numba import njit
 
 from emfabric._kernels.records import BODY_R0, BODY_V, BODY_W, BODY_X
-from emfabric._kernels.shapes import closest_surface_point
+from emfabric._kernels.shapes import closest_surface_point, pressing_point
 from emfabric._kernels.vec3 import cross
 
 
@@ -59,18 +59,50 @@ def find_candidates(x, inv_mass, centre, reach, cand, flag):
 
 
 @njit(cache=True)
-def node_contact(nodes, body, law, b_state, ncand, x0, xk, x1, v1, work):
+def find_segment_candidates(yarns, alpha, broken_below, x, inv_mass, centre, reach, work,
+                            ncand):
+    """Unbroken segments with a free end that pass within `reach` of the body centre (at the
+    positions x); their free end nodes join the node candidates. Returns the new node-candidate
+    count and the segment count."""
+    ends = yarns.ends
+    cand, flag, seg_cand = work.cand, work.flag, work.seg_cand
+    r2 = reach * reach
+    count = 0
+    for s in range(ends.shape[0]):
+        a = ends[s, 0]
+        b = ends[s, 1]
+        if (inv_mass[a] == 0.0 and inv_mass[b] == 0.0) or alpha[s] <= broken_below:
+            continue
+        ax, ay, az = x[0, a] - centre[0], x[1, a] - centre[1], x[2, a] - centre[2]
+        ex, ey, ez = x[0, b] - x[0, a], x[1, b] - x[1, a], x[2, b] - x[2, a]
+        ee = ex * ex + ey * ey + ez * ez
+        t = -(ax * ex + ay * ey + az * ez) / ee if ee > 0.0 else 0.0
+        t = min(max(t, 0.0), 1.0)
+        px, py, pz = ax + t * ex, ay + t * ey, az + t * ez
+        if px * px + py * py + pz * pz < r2:
+            seg_cand[count] = s
+            count += 1
+            for node in (a, b):
+                if flag[node] == 0 and inv_mass[node] > 0.0:
+                    flag[node] = 1
+                    cand[ncand] = node
+                    ncand += 1
+    return ncand, count
+
+
+@njit(cache=True)
+def node_contact(nodes, body, law, b_state, ncand, x1, v1, work):
     """Resolve contact of the candidate nodes against the body in the state b_state.
 
-    Writes corrected x1, v1; records per contact the node, the impulse J on the node [N s], the
-    arm r = x_cp − centre [m] and the projection displacement [m]; adds the candidates'
-    error-measure terms to work.err_rows. Returns the number of contacts.
+    Keeps the candidates' velocities before contact (work.v_pre), writes corrected x1, v1 and
+    records per contact the node, the impulse J on the node [N s], the arm r = x_cp − centre [m]
+    and the outward normal. Returns the number of contacts.
     """
-    nx = nodes.nx
     mass = nodes.mass
     cand = work.cand
-    err_rows = work.err_rows
-    c_node, c_imp, c_arm, c_proj = work.c_node, work.c_imp, work.c_arm, work.c_proj
+    v_pre = work.v_pre
+    c_node, c_node2, c_w = work.c_node, work.c_node2, work.c_w
+    c_imp, c_arm, c_nrm = work.c_imp, work.c_arm, work.c_nrm
     centre = b_state[BODY_X]
     vel = b_state[BODY_V]
     omega = (b_state[BODY_W, 0], b_state[BODY_W, 1], b_state[BODY_W, 2])
@@ -78,6 +110,8 @@ def node_contact(nodes, body, law, b_state, ncand, x0, xk, x1, v1, work):
     nc = 0
     for idx in range(ncand):
         n = cand[idx]
+        for c in range(3):
+            v_pre[c, n] = v1[c, n]
         d = (x1[0, n] - centre[0], x1[1, n] - centre[1], x1[2, n] - centre[2])
         inside, r, nh = closest_surface_point(body, rot, d)
         if inside:
@@ -87,22 +121,123 @@ def node_contact(nodes, body, law, b_state, ncand, x0, xk, x1, v1, work):
             m = mass[n]
             j = contact_impulse(m, (v1[0, n], v1[1, n], v1[2, n]), vs, nh, law)
             c_node[nc] = n
-            px = centre[0] + r[0]
-            py = centre[1] + r[1]
-            pz = centre[2] + r[2]
+            c_node2[nc] = -1
+            c_w[0, nc] = 1.0
+            c_w[1, nc] = 0.0
             for c in range(3):
                 c_imp[c, nc] = j[c]
                 c_arm[c, nc] = r[c]
-            c_proj[0, nc] = px - x1[0, n]
-            c_proj[1, nc] = py - x1[1, n]
-            c_proj[2, nc] = pz - x1[2, n]
-            x1[0, n] = px
-            x1[1, n] = py
-            x1[2, n] = pz
+                c_nrm[c, nc] = nh[c]
+            x1[0, n] = centre[0] + r[0]
+            x1[1, n] = centre[1] + r[1]
+            x1[2, n] = centre[2] + r[2]
             im = 1.0 / m
             for c in range(3):
                 v1[c, n] += j[c] * im
             nc += 1
+    return nc
+
+
+@njit(cache=True, inline="always")
+def _segment_point(x1, a, b, centre, body, rot):
+    """Weights (w_a, w_b) and position relative to the centre of the point where segment (a, b)
+    presses against the body (shapes.pressing_point), symmetric in a and b."""
+    m = (0.5 * (x1[0, a] + x1[0, b]) - centre[0], 0.5 * (x1[1, a] + x1[1, b]) - centre[1],
+         0.5 * (x1[2, a] + x1[2, b]) - centre[2])
+    h = (0.5 * (x1[0, b] - x1[0, a]), 0.5 * (x1[1, b] - x1[1, a]), 0.5 * (x1[2, b] - x1[2, a]))
+    tau = pressing_point(body, rot, m, h)
+    d = (m[0] + tau * h[0], m[1] + tau * h[1], m[2] + tau * h[2])
+    return 0.5 * (1.0 - tau), 0.5 * (1.0 + tau), d
+
+
+@njit(cache=True)
+def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work):
+    """Resolve contact of the candidate segments against the body, after node contact.
+
+    A segment presses on the body at its point P = w_a x_a + w_b x_b nearest the body's axis
+    (shapes.pressing_point). If P is inside, it is moved to the closest surface point and given
+    the contact law's impulse J for the effective mass 1/(w_a²/m_a + w_b²/m_b) of that point;
+    the end nodes share the move and J in proportion w/m, so that P lands on the surface and
+    node a receives w_a J, node b w_b J (their sum J; moment P × J). All segments are
+    resolved from the same positions and velocities (Jacobi), a node shared by k segment
+    contacts receiving 1/k of each (no overshoot), and each node sums its warp and its fill
+    contributions apart: the result does not depend on the order of the segments, so mirror
+    images stay mirror images. Appends the contacts after the first nc; returns the new count.
+    """
+    inv_mass = nodes.inv_mass
+    ends = yarns.ends
+    seg_cand, touch, acc = work.seg_cand, work.touch, work.acc
+    c_node, c_node2, c_w = work.c_node, work.c_node2, work.c_w
+    c_imp, c_arm, c_nrm = work.c_imp, work.c_arm, work.c_nrm
+    centre = b_state[BODY_X]
+    vel = b_state[BODY_V]
+    omega = (b_state[BODY_W, 0], b_state[BODY_W, 1], b_state[BODY_W, 2])
+    rot = b_state[BODY_R0:BODY_R0 + 3]
+    for idx in range(nseg):
+        for node in (ends[seg_cand[idx], 0], ends[seg_cand[idx], 1]):
+            touch[node] = 0
+            for q in range(2):
+                for f in range(2):
+                    for c in range(3):
+                        acc[q, f, c, node] = 0.0
+    first = nc
+    for idx in range(nseg):
+        s = seg_cand[idx]
+        a = ends[s, 0]
+        b = ends[s, 1]
+        wa, wb, d = _segment_point(x1, a, b, centre, body, rot)
+        k = wa * wa * inv_mass[a] + wb * wb * inv_mass[b]
+        if not k > 0.0:
+            continue
+        inside, r, nh = closest_surface_point(body, rot, d)
+        if not inside:
+            continue
+        wr = cross(omega, r)
+        vs = (vel[0] + wr[0], vel[1] + wr[1], vel[2] + wr[2])
+        vp = (wa * v1[0, a] + wb * v1[0, b], wa * v1[1, a] + wb * v1[1, b],
+              wa * v1[2, a] + wb * v1[2, b])
+        j = contact_impulse(1.0 / k, vp, vs, nh, law)
+        c_node[nc] = a
+        c_node2[nc] = b
+        c_w[0, nc] = wa
+        c_w[1, nc] = wb
+        for c in range(3):
+            c_imp[c, nc] = j[c]
+            c_arm[c, nc] = r[c]
+            c_nrm[c, nc] = nh[c]
+        touch[a] += 1
+        touch[b] += 1
+        nc += 1
+    for kc in range(first, nc):
+        a = c_node[kc]
+        b = c_node2[kc]
+        fam = 0 if b - a == 1 else 1
+        wa, wb, d = _segment_point(x1, a, b, centre, body, rot)
+        k = wa * wa * inv_mass[a] + wb * wb * inv_mass[b]
+        scale = 1.0 / max(touch[a], touch[b])
+        for c in range(3):
+            c_imp[c, kc] *= scale
+        move = scale / k
+        for node, w in ((a, wa), (b, wb)):
+            wi = w * inv_mass[node]
+            for c in range(3):
+                acc[0, fam, c, node] += wi * move * (c_arm[c, kc] - d[c])
+                acc[1, fam, c, node] += wi * c_imp[c, kc]
+    for idx in range(nseg):
+        for node in (ends[seg_cand[idx], 0], ends[seg_cand[idx], 1]):
+            if touch[node] > 0:
+                for c in range(3):
+                    x1[c, node] += acc[0, 0, c, node] + acc[0, 1, c, node]
+                    v1[c, node] += acc[1, 0, c, node] + acc[1, 1, c, node]
+                touch[node] = 0
+    return nc
+
+
+@njit(cache=True)
+def candidate_errors(nx, ncand, cand, x0, xk, x1, err_rows):
+    """Add the contact candidates' terms of the error measure (after contact moved them)."""
+    for idx in range(ncand):
+        n = cand[idx]
         row = n // nx
         ex = x1[0, n] - xk[0, n]
         ey = x1[1, n] - xk[1, n]
@@ -112,4 +247,3 @@ def node_contact(nodes, body, law, b_state, ncand, x0, xk, x1, v1, work):
         ey = x1[1, n] - x0[1, n]
         ez = x1[2, n] - x0[2, n]
         err_rows[1, row] += math.sqrt(ex * ex + ey * ey + ez * ez)
-    return nc

@@ -15,7 +15,7 @@ from numba import njit
 from emfabric._kernels.fields import field_at, has_electric_field, magnetic_force
 from emfabric._kernels.materials import strain_energy_density, stretch_sq
 from emfabric._kernels.records import BODY_R0, BODY_V, BODY_W, BODY_X
-from emfabric._kernels.vec3 import cross, dot, mat_vec, norm, vec
+from emfabric._kernels.vec3 import cross, dot, mat_vec, vec
 
 
 @njit(cache=True)
@@ -64,30 +64,43 @@ def step_energy(phys, sin, sout, nc, work, t0, phi, dt, out):
     d_fric = 0.0
     d_cont = 0.0
     d_proj = 0.0
-    c_node, c_imp, c_arm, c_proj = work.c_node, work.c_imp, work.c_arm, work.c_proj
+    c_node, c_node2, c_w = work.c_node, work.c_node2, work.c_w
+    c_imp, c_arm, c_nrm = work.c_imp, work.c_arm, work.c_nrm
+    wbar = (0.5 * (b_in[BODY_W, 0] + b_out[BODY_W, 0]), 0.5 * (b_in[BODY_W, 1] + b_out[BODY_W, 1]),
+            0.5 * (b_in[BODY_W, 2] + b_out[BODY_W, 2]))
     for k in range(nc):
-        n = c_node[k]
+        # the fabric point the impulse acts on: a node, or w_a x_a + w_b x_b on a segment
+        a = c_node[k]
+        b = c_node2[k]
+        wa = c_w[0, k]
+        vp = (wa * 0.5 * (v0[0, a] + v1[0, a]), wa * 0.5 * (v0[1, a] + v1[1, a]),
+              wa * 0.5 * (v0[2, a] + v1[2, a]))
+        if b >= 0:
+            wb = c_w[1, k]
+            vp = (vp[0] + wb * 0.5 * (v0[0, b] + v1[0, b]), vp[1] + wb * 0.5 * (v0[1, b] + v1[1, b]),
+                  vp[2] + wb * 0.5 * (v0[2, b] + v1[2, b]))
         r = vec(c_arm[:, k])
-        rr = norm(r)
-        nh = (r[0] / rr, r[1] / rr, r[2] / rr)
+        nh = vec(c_nrm[:, k])
         jv = vec(c_imp[:, k])
-        wr = cross((0.5 * (b_in[BODY_W, 0] + b_out[BODY_W, 0]),
-                    0.5 * (b_in[BODY_W, 1] + b_out[BODY_W, 1]),
-                    0.5 * (b_in[BODY_W, 2] + b_out[BODY_W, 2])), r)
-        rel = (0.5 * (b_in[BODY_V, 0] + b_out[BODY_V, 0]) + wr[0] - 0.5 * (v0[0, n] + v1[0, n]),
-               0.5 * (b_in[BODY_V, 1] + b_out[BODY_V, 1]) + wr[1] - 0.5 * (v0[1, n] + v1[1, n]),
-               0.5 * (b_in[BODY_V, 2] + b_out[BODY_V, 2]) + wr[2] - 0.5 * (v0[2, n] + v1[2, n]))
+        wr = cross(wbar, r)
+        rel = (0.5 * (b_in[BODY_V, 0] + b_out[BODY_V, 0]) + wr[0] - vp[0],
+               0.5 * (b_in[BODY_V, 1] + b_out[BODY_V, 1]) + wr[1] - vp[1],
+               0.5 * (b_in[BODY_V, 2] + b_out[BODY_V, 2]) + wr[2] - vp[2])
         jn = dot(jv, nh)
         d_cont += jn * dot(nh, rel)
         d_fric += dot((jv[0] - jn * nh[0], jv[1] - jn * nh[1], jv[2] - jn * nh[2]), rel)
-        # forces of the φ-update over the unseen displacement δ (magnetic part does no work)
+    # the contact candidates' displacement beyond the φ-update, δ = Δx − Δt(φ v1 + (1−φ) v0):
+    # the work of the non-impulsive, non-magnetic forces over it is not seen by the velocity
+    # update (zero, to round-off, for a node that contact did not move)
+    cand = work.cand
+    for idx in range(work.counts[0]):
+        n = cand[idx]
         _e1, b1 = field_at(fld, (x1[0, n], x1[1, n], x1[2, n]), t1)
-        m = mass[n]
-        fm = magnetic_force(charge[n], (v1[0, n] - jv[0] / m, v1[1, n] - jv[1] / m,
-                                        v1[2, n] - jv[2] / m), b1)
+        fm = magnetic_force(charge[n], (work.v_pre[0, n], work.v_pre[1, n], work.v_pre[2, n]),
+                            b1)
         for c in range(3):
-            fnm = f1[c, n] - fm[c]
-            d_proj += fnm * (c_proj[c, k] - phi * dt * jv[c] / m)
+            delta = x1[c, n] - x0[c, n] - dt * (phi * v1[c, n] + (1.0 - phi) * v0[c, n])
+            d_proj += (f1[c, n] - fm[c]) * delta
 
     d_dam = 0.0
     ends, rest, coef = yarns.ends, yarns.rest_length, yarns.stiffness

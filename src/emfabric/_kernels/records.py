@@ -26,7 +26,7 @@ BODY_ROWS = 8
 
 MATERIAL_KSV, MATERIAL_FUNG = 0, 1
 REGION_UNIFORM, REGION_HALF_SPACE = 0, 1
-SHAPE_SPHERE = 0
+SHAPE_SPHERE, SHAPE_OGIVE, SHAPE_CYLINDER, SHAPE_FSP = 0, 1, 2, 3
 
 
 class Nodes(NamedTuple):
@@ -93,9 +93,9 @@ class Body(NamedTuple):
     active: bool
     """False when the scenario has no projectile."""
     shape: int
-    """SHAPE_SPHERE."""
+    """SHAPE_SPHERE, SHAPE_OGIVE, SHAPE_CYLINDER or SHAPE_FSP."""
     radius: float
-    """Shape size [m] (sphere radius)."""
+    """Sphere radius, or the body radius (calibre/2) of the other shapes [m]."""
     mass: float
     inertia: np.ndarray
     """Inertia about the centre of mass in the body frame [kg m²], (3, 3)."""
@@ -104,7 +104,24 @@ class Body(NamedTuple):
     charge: np.ndarray
     """[C], (charge_count,)."""
     nose: np.ndarray
-    """Tilt marker relative to the centre of mass, body frame [m], (3,)."""
+    """Tilt and yaw marker relative to the centre of mass, body frame [m], (3,)."""
+    length: float = 0.0
+    """Overall length L [m] (not the sphere)."""
+    nose_length: float = 0.0
+    """Ogive nose length L_n [m]."""
+    base: float = 0.0
+    """Height of the centre of mass above the base face along the axis [m]."""
+    arc_radius: float = 0.0
+    """Ogive arc radius ϱ = (R² + L_n²)/(2R) [m]."""
+    flat_half_width: float = 0.0
+    """FSP: half the width of the flat between the chisel faces [m]."""
+    bevel_cos: float = 1.0
+    """FSP: cos β, β the angle between a chisel face and the axis."""
+    bevel_sin: float = 0.0
+    frame: np.ndarray = np.eye(3)
+    """Rows e1, e2, e3 (e3: the nose axis) of the shape's frame in the body frame, (3, 3)."""
+    bound: float = 0.0
+    """Bounding radius about the centre of mass [m] (not the sphere)."""
 
 
 class Contact(NamedTuple):
@@ -112,6 +129,8 @@ class Contact(NamedTuple):
 
     static_friction: float
     dynamic_friction: float
+    segments: bool = False
+    """Also resolve contact of the yarn segments (not only the nodes) against the body."""
 
 
 class Solver(NamedTuple):
@@ -160,25 +179,45 @@ class Work(NamedTuple):
     err_num: np.ndarray
     err_den: np.ndarray
     cand: np.ndarray
-    """Contact candidates (node indices)."""
+    """Contact candidates (node indices); their count in counts[0]."""
     flag: np.ndarray
     """1 for contact candidates (uint8)."""
+    seg_cand: np.ndarray
+    """Candidate segments for segment contact; their count in counts[1]."""
+    counts: np.ndarray
+    """[candidate nodes, candidate segments, node contacts, segment contacts] (int64)."""
+    v_pre: np.ndarray
+    """Candidates' velocity before contact [m/s], (3, node_count)."""
+    touch: np.ndarray
+    """Segment contacts per node in the current iterate (int64, node_count)."""
+    acc: np.ndarray
+    """Per-node corrections of segment contact by yarn family (warp, fill): position [m] and
+    velocity [m/s], (2, 2, 3, node_count)."""
     c_node: np.ndarray
+    """Per contact: its node, or the first end of its segment."""
+    c_node2: np.ndarray
+    """Per contact: the second end of its segment, −1 for a node contact."""
+    c_w: np.ndarray
+    """Per contact: the weights of its (one or two) nodes in the contact point, (2, contacts)."""
     c_imp: np.ndarray
-    """Contact impulse on the node [N s], (3, node_count)."""
+    """Contact impulse on the fabric [N s], (3, contacts)."""
     c_arm: np.ndarray
     """Contact point relative to the body centre [m]."""
-    c_proj: np.ndarray
-    """Projection displacement [m]."""
+    c_nrm: np.ndarray
+    """Outward surface normal at the contact point."""
     sum_buf: np.ndarray
     reaction: np.ndarray
     """Total contact + friction impulse on the body [N s] and its moment about the centre of
     mass [N m s] of the last iterate, (2, 3)."""
 
 
-def make_work(nx: int, ny: int) -> Work:
+def make_work(nx: int, ny: int, seg_count: int = 0) -> Work:
     n = nx * ny
+    nmax = n + seg_count
     return Work(np.empty((3, n)), np.empty((2, ny)), np.empty(n), np.empty(n),
                 np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.uint8),
-                np.empty(n, dtype=np.int64), np.empty((3, n)), np.empty((3, n)),
-                np.empty((3, n)), np.empty(n), np.zeros((2, 3)))
+                np.empty(max(seg_count, 1), dtype=np.int64), np.zeros(4, dtype=np.int64),
+                np.empty((3, n)), np.zeros(n, dtype=np.int64), np.zeros((2, 2, 3, n)),
+                np.empty(nmax, dtype=np.int64), np.empty(nmax, dtype=np.int64),
+                np.empty((2, nmax)), np.empty((3, nmax)), np.empty((3, nmax)),
+                np.empty((3, nmax)), np.empty(nmax), np.zeros((2, 3)))

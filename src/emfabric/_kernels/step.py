@@ -12,7 +12,13 @@ from numba import njit
 
 from emfabric._kernels.anderson import anderson_mix
 from emfabric._kernels.body import body_update
-from emfabric._kernels.contact import find_candidates, node_contact
+from emfabric._kernels.contact import (
+    candidate_errors,
+    find_candidates,
+    find_segment_candidates,
+    node_contact,
+    segment_contact,
+)
 from emfabric._kernels.nodes import fused_iterate, fused_iterate_threads
 from emfabric._kernels.records import BODY_R0, BODY_V, BODY_W, BODY_X
 from emfabric._kernels.shapes import bounding_radius, is_inside
@@ -105,14 +111,21 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
         still += abs(x0[0, n]) + abs(x0[1, n]) + abs(x0[2, n])
     still *= 1e-13
     ncand = 0
+    nseg = 0
     if body.active:
         # contact candidates: nodes that can reach the body within this step
         radius = bounding_radius(body)
         speed = norm(b_in[BODY_V]) + radius * norm(b_in[BODY_W])
         reach = 1.05 * radius + 2.0 * dt * (speed + math.sqrt(vmax))
         ncand = find_candidates(x0, inv_mass, b_in[BODY_X], reach, work.cand, flag)
+        if phys.contact.segments:
+            ncand, nseg = find_segment_candidates(phys.yarns, sin.alpha,
+                                                  phys.material.broken_below, x0, inv_mass,
+                                                  b_in[BODY_X], reach, work, ncand)
     else:
         flag[:] = 0
+    work.counts[0] = ncand
+    work.counts[1] = nseg
 
     imp_force = work.reaction[0]
     imp_moment = work.reaction[1]
@@ -142,7 +155,11 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
         num_b = 0.0
         den_b = 0.0
         if body.active:
-            nc = node_contact(nodes, body, phys.contact, b_out, ncand, x0, prev, cur, v1, work)
+            nc = node_contact(nodes, body, phys.contact, b_out, ncand, cur, v1, work)
+            if phys.contact.segments:
+                nc = segment_contact(nodes, phys.yarns, body, phys.contact, b_out, nseg, nc,
+                                     cur, v1, work)
+            candidate_errors(nodes.nx, ncand, work.cand, x0, prev, cur, err_rows)
             _reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, imp_force, imp_moment)
             num_b, den_b = body_update(body, phys.field, b_in, b_out, t1, phi, dt, imp_force,
                                        imp_moment, tol)

@@ -156,3 +156,16 @@ def copy_into(dst, src):
     for i in range(src.shape[0]):
         for j in range(src.shape[1]):
             dst[i, j] = src[i, j]
+
+
+@njit(cache=True, inline="always")
+def to_shape_frame(rot, frame, d):
+    """A world-frame vector d in the shape's own frame: frame · (Rᵀ d) (rot: body → inertial,
+    frame: rows e1, e2, e3 of the shape's axes in the body frame)."""
+    return mat_vec(frame, mat_t_vec(rot, d))
+
+
+@njit(cache=True, inline="always")
+def from_shape_frame(rot, frame, q):
+    """Inverse of to_shape_frame: R · (frameᵀ q)."""
+    return mat_vec(rot, mat_t_vec(frame, q))
