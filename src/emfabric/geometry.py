@@ -60,7 +60,7 @@ class ShapeGeometry:
             cuts = [0.0, max(start, 0.0), big_l]
         else:
             cuts = [0.0, big_l]
-        return [(a, b) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
+        return [(a, b) for a, b in zip(cuts[:-1], cuts[1:], strict=True) if b > a]
 
     def profile_radius(self, s: np.ndarray) -> np.ndarray:
         """Radius of the body of revolution at height s (ogive, cylinder)."""
@@ -171,7 +171,7 @@ class ShapeGeometry:
         prof += [(s, big_r) for s in side]
         if self.kind == "ogive":
             s = np.linspace(lb, big_l, n_axial + 1)[1:]
-            prof += list(zip(s, self.profile_radius(s)))
+            prof += list(zip(s, self.profile_radius(s), strict=True))
             prof[-1] = (big_l, 0.0)
         else:
             prof += [(big_l, big_r * f) for f in (0.5, 0.0)]

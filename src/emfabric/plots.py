@@ -25,7 +25,7 @@ from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.ticker import MaxNLocator
-from mpl_toolkits.mplot3d.art3d import Line3DCollection
+from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
 log = logging.getLogger(__name__)
 
@@ -50,7 +50,8 @@ FLAT_RANGE = 1e-6
 """Width of the colour range below α_max when every shown yarn has the same α (e.g. all intact)."""
 
 NOSE_ARROW = 1.6
-"""Length of the orientation arrow (centre along the nose marker) in projectile radii."""
+"""Length of the orientation arrow: the nose marker (centre of mass to the leading surface
+point) times this."""
 
 FIGURE_STEMS = ("spin", "impact_sequence", "energy", "velocity")
 """File stems of the single-run figures, each saved as .png and .pdf."""
@@ -422,7 +423,8 @@ def scene_limits(snapshots: xr.Dataset, indices: Sequence[int]) -> np.ndarray:
     for k in indices:
         x = snapshots["node_position"][int(k)].values
         lo, hi = np.minimum(lo, x.min(axis=0)), np.maximum(hi, x.max(axis=0))
-    radius = float(snapshots.attrs.get("projectile_radius", 0.0))
+    radius = float(snapshots.attrs.get("projectile_size",
+                                       snapshots.attrs.get("projectile_radius", 0.0)))
     if int(snapshots.attrs.get("has_projectile", 1)) and radius > 0:
         body = snapshots["projectile_position"].values[np.asarray(indices, dtype=int)]
         reach = NOSE_ARROW * radius
@@ -451,8 +453,9 @@ def _unit_sphere(n_lat: int = 9, n_lon: int = 17) -> np.ndarray:
 
 
 class SheetView:
-    """One 3-D view: yarns as line segments coloured by damage α, the projectile as a
-    wireframe sphere (turning with the body) and an arrow from its centre along the nose."""
+    """One 3-D view: yarns as line segments coloured by damage α, the projectile as its real
+    surface (a wireframe sphere, or the triangulated ogive, cylinder or FSP of the run's
+    snapshots.nc), turning with the body, and an arrow from its centre along the nose."""
 
     def __init__(self, ax, snapshots: xr.Dataset, norm: Normalize, limits: np.ndarray, *,
                  linewidth: float | None = None, elev: float = 22.0, azim: float = -60.0):
@@ -463,6 +466,12 @@ class SheetView:
             self.radius = 0.0
         self.nose = snapshots["projectile_nose_body"].values
         self._sphere = _unit_sphere() * self.radius  # body frame, shape (3, n_lat, n_lon)
+        # a shape other than the sphere: its surface mesh (body frame) from the file
+        self._surface = None
+        if (snapshots.attrs.get("projectile_shape", "sphere") != "sphere"
+                and "projectile_surface" in snapshots):
+            self._surface = (snapshots["projectile_surface"].values,
+                             snapshots["projectile_surface_triangles"].values.astype(np.int64))
         self._body_artists: list = []
         if linewidth is None:
             linewidth = yarn_linewidth(snapshots)
@@ -493,11 +502,19 @@ class SheetView:
             return
         centre = snapshots["projectile_position"][k].values
         rot = snapshots["projectile_rotation"][k].values  # body -> inertial
-        pts = np.einsum("ij,jab->iab", rot, self._sphere) + centre[:, None, None]
-        self._body_artists.append(self.ax.plot_wireframe(
-            pts[0], pts[1], pts[2], color="0.25", linewidth=0.4))
-        nose = rot @ self.nose
-        arrow = NOSE_ARROW * self.radius * nose / max(np.linalg.norm(nose), 1e-300)
+        if self._surface is not None:
+            pts, tris = self._surface
+            world = pts @ rot.T + centre
+            skin = Poly3DCollection(world[tris], facecolor=(0.55, 0.55, 0.6, 0.35),
+                                    edgecolor=(0.25, 0.25, 0.25, 0.5), linewidths=0.2)
+            self.ax.add_collection3d(skin, autolim=False)
+            self._body_artists.append(skin)
+        else:
+            pts = np.einsum("ij,jab->iab", rot, self._sphere) + centre[:, None, None]
+            self._body_artists.append(self.ax.plot_wireframe(
+                pts[0], pts[1], pts[2], color="0.25", linewidth=0.4))
+        # the nose marker (centre of mass to the leading surface point), lengthened
+        arrow = NOSE_ARROW * (rot @ self.nose)
         self._body_artists.append(self.ax.quiver(
             *centre, *arrow, color="k", linewidth=1.8, arrow_length_ratio=0.25))
 

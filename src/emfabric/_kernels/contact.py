@@ -14,7 +14,7 @@ import math
 from numba import njit
 
 from emfabric._kernels.records import BODY_R0, BODY_V, BODY_W, BODY_X
-from emfabric._kernels.shapes import closest_surface_point, pressing_point
+from emfabric._kernels.shapes import contact_margin, pressing_point, surface_point
 from emfabric._kernels.vec3 import cross
 
 
@@ -58,6 +58,10 @@ def find_candidates(x, inv_mass, centre, reach, cand, flag):
     return count
 
 
+SEGMENT_SWEEPS = 8
+"""Jacobi passes of segment contact per iterate (each halves the shared residual, at worst)."""
+
+
 @njit(cache=True)
 def find_segment_candidates(yarns, alpha, broken_below, x, inv_mass, centre, reach, work,
                             ncand):
@@ -81,6 +85,7 @@ def find_segment_candidates(yarns, alpha, broken_below, x, inv_mass, centre, rea
         px, py, pz = ax + t * ex, ay + t * ey, az + t * ez
         if px * px + py * py + pz * pz < r2:
             seg_cand[count] = s
+            work.seg_active[count] = 0
             count += 1
             for node in (a, b):
                 if flag[node] == 0 and inv_mass[node] > 0.0:
@@ -94,9 +99,14 @@ def find_segment_candidates(yarns, alpha, broken_below, x, inv_mass, centre, rea
 def node_contact(nodes, body, law, b_state, ncand, x1, v1, work):
     """Resolve contact of the candidate nodes against the body in the state b_state.
 
-    Keeps the candidates' velocities before contact (work.v_pre), writes corrected x1, v1 and
-    records per contact the node, the impulse J on the node [N s], the arm r = x_cp − centre [m]
-    and the outward normal. Returns the number of contacts.
+    A node inside is moved to the closest surface point and given the contact law's impulse.
+    With segment contact on (law.segments), a node that was in contact in an earlier iterate
+    of this step (work.flag = 2) keeps its contact while it stays within
+    shapes.contact_margin outside the surface: it gets the impulse (which never pulls) but is
+    not moved. Keeps the candidates' velocities before
+    contact (work.v_pre), writes corrected x1, v1 and records per contact the node, the impulse
+    J on the node [N s], the arm r = x_cp − centre [m] and the outward normal. Returns the
+    number of contacts.
     """
     mass = nodes.mass
     cand = work.cand
@@ -107,14 +117,18 @@ def node_contact(nodes, body, law, b_state, ncand, x1, v1, work):
     vel = b_state[BODY_V]
     omega = (b_state[BODY_W, 0], b_state[BODY_W, 1], b_state[BODY_W, 2])
     rot = b_state[BODY_R0:BODY_R0 + 3]
+    flag = work.flag
+    # contacts are kept (see shapes.contact_margin) with segment contact only: node contact
+    # alone is the paper's model, as it was
+    keep = contact_margin(body) if law.segments else 0.0
     nc = 0
     for idx in range(ncand):
         n = cand[idx]
         for c in range(3):
             v_pre[c, n] = v1[c, n]
         d = (x1[0, n] - centre[0], x1[1, n] - centre[1], x1[2, n] - centre[2])
-        inside, r, nh = closest_surface_point(body, rot, d)
-        if inside:
+        g, r, nh = surface_point(body, rot, d)
+        if g < 0.0 or (flag[n] == 2 and g < keep):
             # stick: the surface point's velocity, eqs. 4.6, 4.9
             wr = cross(omega, r)
             vs = (vel[0] + wr[0], vel[1] + wr[1], vel[2] + wr[2])
@@ -124,13 +138,18 @@ def node_contact(nodes, body, law, b_state, ncand, x1, v1, work):
             c_node2[nc] = -1
             c_w[0, nc] = 1.0
             c_w[1, nc] = 0.0
+            # the reaction acts where the node is put: on the surface, or (a contact kept
+            # outside) where it is
+            arm = r if g < 0.0 else d
             for c in range(3):
                 c_imp[c, nc] = j[c]
-                c_arm[c, nc] = r[c]
+                c_arm[c, nc] = arm[c]
                 c_nrm[c, nc] = nh[c]
-            x1[0, n] = centre[0] + r[0]
-            x1[1, n] = centre[1] + r[1]
-            x1[2, n] = centre[2] + r[2]
+            if g < 0.0:
+                x1[0, n] = centre[0] + r[0]
+                x1[1, n] = centre[1] + r[1]
+                x1[2, n] = centre[2] + r[2]
+            flag[n] = 2
             im = 1.0 / m
             for c in range(3):
                 v1[c, n] += j[c] * im
@@ -158,78 +177,127 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work):
     (shapes.pressing_point). If P is inside, it is moved to the closest surface point and given
     the contact law's impulse J for the effective mass 1/(w_a²/m_a + w_b²/m_b) of that point;
     the end nodes share the move and J in proportion w/m, so that P lands on the surface and
-    node a receives w_a J, node b w_b J (their sum J; moment P × J). All segments are
-    resolved from the same positions and velocities (Jacobi), a node shared by k segment
-    contacts receiving 1/k of each (no overshoot), and each node sums its warp and its fill
-    contributions apart: the result does not depend on the order of the segments, so mirror
-    images stay mirror images. Appends the contacts after the first nc; returns the new count.
+    node a receives w_a J, node b w_b J (their sum J; moment P × J).
+
+    All segments are resolved from the same positions and velocities (Jacobi). Where several
+    segment contacts share a node, each is scaled by its share of their penetration depths at
+    that node (the smaller share of its two nodes): the corrections a node receives never add
+    up to more than one full correction (no overshoot), and the share varies continuously as a
+    segment enters or leaves the body (a count would jump, and the fixed-point iteration would
+    cycle). The pass is repeated (SEGMENT_SWEEPS times at most, until no segment is in contact)
+    on the corrected positions and velocities, each contact's impulses adding up, so that
+    the shared corrections converge to the full ones. As for nodes, a segment in contact
+    earlier in the step keeps its contact within shapes.contact_margin outside the surface
+    (impulse, no move). Each node sums its warp and its fill contributions apart: the result
+    does not depend on the order of the segments, so mirror images stay mirror images. Appends the contacts
+    after the first nc; returns the new count.
     """
     inv_mass = nodes.inv_mass
     ends = yarns.ends
-    seg_cand, touch, acc = work.seg_cand, work.touch, work.acc
+    seg_cand, share, acc = work.seg_cand, work.share, work.acc
+    active, slot, tmp = work.seg_active, work.seg_slot, work.seg_tmp
     c_node, c_node2, c_w = work.c_node, work.c_node2, work.c_w
     c_imp, c_arm, c_nrm = work.c_imp, work.c_arm, work.c_nrm
+    keep = contact_margin(body)
     centre = b_state[BODY_X]
     vel = b_state[BODY_V]
     omega = (b_state[BODY_W, 0], b_state[BODY_W, 1], b_state[BODY_W, 2])
     rot = b_state[BODY_R0:BODY_R0 + 3]
     for idx in range(nseg):
-        for node in (ends[seg_cand[idx], 0], ends[seg_cand[idx], 1]):
-            touch[node] = 0
-            for q in range(2):
+        slot[idx] = -1
+    for _sweep in range(SEGMENT_SWEEPS):
+        for idx in range(nseg):
+            for node in (ends[seg_cand[idx], 0], ends[seg_cand[idx], 1]):
                 for f in range(2):
+                    share[f, node] = 0.0
+                    for q in range(2):
+                        for c in range(3):
+                            acc[q, f, c, node] = 0.0
+        found = 0
+        for idx in range(nseg):
+            tmp[6, idx] = 0.0
+            s = seg_cand[idx]
+            a = ends[s, 0]
+            b = ends[s, 1]
+            wa, wb, d = _segment_point(x1, a, b, centre, body, rot)
+            k = wa * wa * inv_mass[a] + wb * wb * inv_mass[b]
+            if not k > 0.0:
+                continue
+            g, r, nh = surface_point(body, rot, d)
+            if not (g < 0.0 or (active[idx] == 1 and g < keep)):
+                continue
+            active[idx] = 1
+            wr = cross(omega, r)
+            vs = (vel[0] + wr[0], vel[1] + wr[1], vel[2] + wr[2])
+            vp = (wa * v1[0, a] + wb * v1[0, b], wa * v1[1, a] + wb * v1[1, b],
+                  wa * v1[2, a] + wb * v1[2, b])
+            j = contact_impulse(1.0 / k, vp, vs, nh, law)
+            if slot[idx] < 0:
+                slot[idx] = nc
+                c_node[nc] = a
+                c_node2[nc] = b
+                for c in range(3):
+                    c_imp[c, nc] = 0.0
+                nc += 1
+            kc = slot[idx]
+            c_w[0, kc] = wa
+            c_w[1, kc] = wb
+            for c in range(3):
+                c_nrm[c, kc] = nh[c]
+                tmp[c, idx] = j[c]
+                tmp[3 + c, idx] = r[c] - d[c]
+            # weight of this contact among those at its nodes: keep − g, continuous as the
+            # segment enters (g = 0) and leaves (g = keep)
+            dep = keep - g
+            tmp[6, idx] = dep
+            fam = 0 if b - a == 1 else 1
+            share[fam, a] += dep
+            share[fam, b] += dep
+            found += 1
+        if found == 0:
+            break
+        for idx in range(nseg):
+            dep = tmp[6, idx]
+            if dep == 0.0:
+                continue
+            s = seg_cand[idx]
+            a = ends[s, 0]
+            b = ends[s, 1]
+            kc = slot[idx]
+            wa = c_w[0, kc]
+            wb = c_w[1, kc]
+            fam = 0 if b - a == 1 else 1
+            k = wa * wa * inv_mass[a] + wb * wb * inv_mass[b]
+            total = max(share[0, a] + share[1, a], share[0, b] + share[1, b])
+            scale = dep / total if total > 0.0 else 1.0
+            # only a point inside is moved (to the surface); a kept contact outside is not
+            move = scale / k if dep > keep else 0.0
+            for c in range(3):
+                c_imp[c, kc] += scale * tmp[c, idx]
+            for node, w in ((a, wa), (b, wb)):
+                wi = w * inv_mass[node]
+                for c in range(3):
+                    acc[0, fam, c, node] += wi * move * tmp[3 + c, idx]
+                    acc[1, fam, c, node] += wi * scale * tmp[c, idx]
+        for idx in range(nseg):
+            for node in (ends[seg_cand[idx], 0], ends[seg_cand[idx], 1]):
+                if share[0, node] + share[1, node] > 0.0:
                     for c in range(3):
-                        acc[q, f, c, node] = 0.0
-    first = nc
-    for idx in range(nseg):
-        s = seg_cand[idx]
-        a = ends[s, 0]
-        b = ends[s, 1]
-        wa, wb, d = _segment_point(x1, a, b, centre, body, rot)
-        k = wa * wa * inv_mass[a] + wb * wb * inv_mass[b]
-        if not k > 0.0:
-            continue
-        inside, r, nh = closest_surface_point(body, rot, d)
-        if not inside:
-            continue
-        wr = cross(omega, r)
-        vs = (vel[0] + wr[0], vel[1] + wr[1], vel[2] + wr[2])
-        vp = (wa * v1[0, a] + wb * v1[0, b], wa * v1[1, a] + wb * v1[1, b],
-              wa * v1[2, a] + wb * v1[2, b])
-        j = contact_impulse(1.0 / k, vp, vs, nh, law)
-        c_node[nc] = a
-        c_node2[nc] = b
-        c_w[0, nc] = wa
-        c_w[1, nc] = wb
-        for c in range(3):
-            c_imp[c, nc] = j[c]
-            c_arm[c, nc] = r[c]
-            c_nrm[c, nc] = nh[c]
-        touch[a] += 1
-        touch[b] += 1
-        nc += 1
-    for kc in range(first, nc):
+                        x1[c, node] += acc[0, 0, c, node] + acc[0, 1, c, node]
+                        v1[c, node] += acc[1, 0, c, node] + acc[1, 1, c, node]
+                    share[0, node] = 0.0
+                    share[1, node] = 0.0
+    # the body's reaction acts where the fabric point now is (the node, or w_a x_a + w_b x_b):
+    # the moments the two receive are then exactly opposite, about any point
+    for kc in range(nc):
         a = c_node[kc]
         b = c_node2[kc]
-        fam = 0 if b - a == 1 else 1
-        wa, wb, d = _segment_point(x1, a, b, centre, body, rot)
-        k = wa * wa * inv_mass[a] + wb * wb * inv_mass[b]
-        scale = 1.0 / max(touch[a], touch[b])
+        wa = c_w[0, kc]
         for c in range(3):
-            c_imp[c, kc] *= scale
-        move = scale / k
-        for node, w in ((a, wa), (b, wb)):
-            wi = w * inv_mass[node]
-            for c in range(3):
-                acc[0, fam, c, node] += wi * move * (c_arm[c, kc] - d[c])
-                acc[1, fam, c, node] += wi * c_imp[c, kc]
-    for idx in range(nseg):
-        for node in (ends[seg_cand[idx], 0], ends[seg_cand[idx], 1]):
-            if touch[node] > 0:
-                for c in range(3):
-                    x1[c, node] += acc[0, 0, c, node] + acc[0, 1, c, node]
-                    v1[c, node] += acc[1, 0, c, node] + acc[1, 1, c, node]
-                touch[node] = 0
+            if b >= 0:
+                c_arm[c, kc] = wa * x1[c, a] + c_w[1, kc] * x1[c, b] - centre[c]
+            else:
+                c_arm[c, kc] = x1[c, a] - centre[c]
     return nc
 
 

@@ -3,10 +3,11 @@
 With v̄ = (v0 + v1)/2 the φ-scheme gives exactly ΔKE = (Δt ψ̄ + J)·v̄ for a node, and the same
 for the body, so the work of a contact impulse J on the pair (node, body point) is
 J·(v̄_node − v̄_point); its negative is what contact (normal part) and friction (tangential part)
-dissipate. Field and gravity work use the displacements. A contact node's displacement differs
-from the φ-update's Δt(φ v1 + (1−φ) v0) by δ = Δ − φΔt J/m (Δ: the projection jump); the work
-the non-impulsive, non-magnetic forces do over δ is not seen by the velocity update and is booked
-as projection dissipation. Damage releases α-drop × stored energy.
+dissipate; for a segment contact the fabric point is w_a x_a + w_b x_b and its velocity
+w_a v̄_a + w_b v̄_b. Field and gravity work use the displacements. A contact candidate's
+displacement differs from the φ-update's Δt(φ v1 + (1−φ) v0) by δ (the projection's jump, less
+φΔt J/m); the work the non-impulsive, non-magnetic forces do over δ is not seen by the velocity
+update and is booked as projection dissipation. Damage releases α-drop × stored energy.
 """
 
 
@@ -77,7 +78,8 @@ def step_energy(phys, sin, sout, nc, work, t0, phi, dt, out):
               wa * 0.5 * (v0[2, a] + v1[2, a]))
         if b >= 0:
             wb = c_w[1, k]
-            vp = (vp[0] + wb * 0.5 * (v0[0, b] + v1[0, b]), vp[1] + wb * 0.5 * (v0[1, b] + v1[1, b]),
+            vp = (vp[0] + wb * 0.5 * (v0[0, b] + v1[0, b]),
+                  vp[1] + wb * 0.5 * (v0[1, b] + v1[1, b]),
                   vp[2] + wb * 0.5 * (v0[2, b] + v1[2, b]))
         r = vec(c_arm[:, k])
         nh = vec(c_nrm[:, k])

@@ -206,7 +206,7 @@ def _row_block(j0, j1, nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_
         en = err_num[nb:e]
         ed = err_den[nb:e]
         for i in range(nx):
-            keep = 1.0 - skip[i]
+            keep = 1.0 if skip[i] == 0 else 0.0
             dx = px[i] - kx[i]
             dy = py[i] - ky[i]
             dz = pz[i] - kz[i]

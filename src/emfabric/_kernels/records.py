@@ -181,15 +181,21 @@ class Work(NamedTuple):
     cand: np.ndarray
     """Contact candidates (node indices); their count in counts[0]."""
     flag: np.ndarray
-    """1 for contact candidates (uint8)."""
+    """1 for contact candidates, 2 for those in contact earlier in this step (uint8)."""
     seg_cand: np.ndarray
     """Candidate segments for segment contact; their count in counts[1]."""
+    seg_active: np.ndarray
+    """1 for a candidate segment in contact earlier in this step (int8, by candidate index)."""
+    seg_slot: np.ndarray
+    """The contact record of each candidate segment in the current iterate, −1 for none."""
+    seg_tmp: np.ndarray
+    """One segment-contact pass: impulse, move to the surface and weight, (7, seg_count)."""
     counts: np.ndarray
     """[candidate nodes, candidate segments, node contacts, segment contacts] (int64)."""
     v_pre: np.ndarray
     """Candidates' velocity before contact [m/s], (3, node_count)."""
-    touch: np.ndarray
-    """Segment contacts per node in the current iterate (int64, node_count)."""
+    share: np.ndarray
+    """Penetration depths of the segment contacts at each node by yarn family, (2, node_count)."""
     acc: np.ndarray
     """Per-node corrections of segment contact by yarn family (warp, fill): position [m] and
     velocity [m/s], (2, 2, 3, node_count)."""
@@ -216,8 +222,11 @@ def make_work(nx: int, ny: int, seg_count: int = 0) -> Work:
     nmax = n + seg_count
     return Work(np.empty((3, n)), np.empty((2, ny)), np.empty(n), np.empty(n),
                 np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.uint8),
-                np.empty(max(seg_count, 1), dtype=np.int64), np.zeros(4, dtype=np.int64),
-                np.empty((3, n)), np.zeros(n, dtype=np.int64), np.zeros((2, 2, 3, n)),
+                np.empty(max(seg_count, 1), dtype=np.int64),
+                np.zeros(max(seg_count, 1), dtype=np.int8),
+                np.empty(max(seg_count, 1), dtype=np.int64), np.zeros((7, max(seg_count, 1))),
+                np.zeros(4, dtype=np.int64),
+                np.empty((3, n)), np.zeros((2, n)), np.zeros((2, 2, 3, n)),
                 np.empty(nmax, dtype=np.int64), np.empty(nmax, dtype=np.int64),
                 np.empty((2, nmax)), np.empty((3, nmax)), np.empty((3, nmax)),
                 np.empty((3, nmax)), np.empty(nmax), np.zeros((2, 3)))

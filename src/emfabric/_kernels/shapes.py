@@ -30,14 +30,17 @@ from emfabric._kernels.vec3 import from_shape_frame, to_shape_frame
 
 
 @njit(cache=True, inline="always")
-def _sphere_closest(radius, d):
+def _sphere_surface(radius, d):
     d2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
-    if d2 < radius * radius and d2 > 0.0:
+    if d2 > 0.0:
         dd = math.sqrt(d2)
         n = (d[0] / dd, d[1] / dd, d[2] / dd)
         # closest point on the surface, eq. 5.1
-        return True, (radius * n[0], radius * n[1], radius * n[2]), n
-    return False, d, d
+        # g has the sign of d2 − R² exactly: a node left on the surface by the previous
+        # projection is in or out by the same rounding as in the paper's runs
+        g = (d2 - radius * radius) / (dd + radius)
+        return g, (radius * n[0], radius * n[1], radius * n[2]), n
+    return math.inf, d, d
 
 
 @njit(cache=True, inline="always")
@@ -68,7 +71,15 @@ def _local_closest(body, q):
         dr = rr + rho - big_r
         h = math.sqrt(ds * ds + dr * dr)
         gi = h - rho
-        if gi > g:
+        if rr == 0.0 and ds > 0.0:
+            # on the axis in the nose every meridian is equally close: take the one point
+            # that keeps the symmetry, the tip (a node met dead centre rides on the tip)
+            gi = s - big_l
+            if gi > g:
+                g = gi
+                p = (0.0, 0.0, big_l - body.base)
+                n = (0.0, 0.0, 1.0)
+        elif gi > g:
             ns, nr = (ds / h, dr / h) if h > 0.0 else (1.0, 0.0)
             pr = big_r - rho + rho * nr
             g = gi
@@ -101,17 +112,34 @@ def _local_closest(body, q):
 
 
 @njit(cache=True, inline="always")
+def surface_point(body, rot, d):
+    """(g, r, n) for a point at d: g < 0 inside the body (−g the distance to the surface),
+    r the surface point it projects to (relative to the centre, inertial frame) and n the
+    outward unit normal there. Exact for a point inside; for a point outside, g and r belong
+    to the nearest constraint surface (exact near a face, where contact uses it)."""
+    if body.shape == SHAPE_SPHERE:
+        return _sphere_surface(body.radius, d)
+    g, p, n = _local_closest(body, to_shape_frame(rot, body.frame, d))
+    return g, from_shape_frame(rot, body.frame, p), from_shape_frame(rot, body.frame, n)
+
+
+@njit(cache=True, inline="always")
 def closest_surface_point(body, rot, d):
     """(inside, r, n) for a point at d: whether it lies strictly inside the body, and if so the
     closest surface point r (relative to the centre, inertial frame) and the outward unit
     normal n there."""
-    if body.shape == SHAPE_SPHERE:
-        return _sphere_closest(body.radius, d)
-    q = to_shape_frame(rot, body.frame, d)
-    g, p, n = _local_closest(body, q)
+    g, r, n = surface_point(body, rot, d)
     if g < 0.0:
-        return True, from_shape_frame(rot, body.frame, p), from_shape_frame(rot, body.frame, n)
+        return True, r, n
     return False, d, d
+
+
+@njit(cache=True, inline="always")
+def contact_margin(body):
+    """Distance outside the surface [m] within which a contact made earlier in the same step is
+    kept (so that a contact whose reaction lifts the body off by a hair does not switch on and
+    off from one iterate to the next): 10⁻³ of the bounding radius."""
+    return 1e-3 * bounding_radius(body)
 
 
 @njit(cache=True, inline="always")

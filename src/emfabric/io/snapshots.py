@@ -36,7 +36,11 @@ class Snapshots:
         self.times: list[float] = list(times or [])
         self.written = len(self.times)
         self._pending: list[tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
-        self._sphere = _sphere_mesh(model.body.radius) if model.has_body else None
+        # the projectile's surface in the body frame (its frame at t = 0)
+        self._surface = None
+        if model.has_body:
+            pts, tris = model.geometry.mesh()
+            self._surface = (pts @ model.body.frame, tris)
 
     @property
     def count(self) -> int:
@@ -83,6 +87,7 @@ class Snapshots:
                                        {"units": "m", "long_name": "node position at t = 0"}),
                 "projectile_nose_body": (("xyz",), m.body.nose,
                                          {"units": "m", "long_name": "nose marker, body frame"}),
+                **self._surface_variables(),
             },
             coords={
                 "time": ("snapshot", times, TIME_ATTRS),
@@ -90,8 +95,25 @@ class Snapshots:
             },
             attrs={**attrs, "grid_nx": m.nx, "grid_ny": m.ny,
                    "projectile_radius": m.body.radius if m.has_body else 0.0,
+                   "projectile_shape": m.scenario.projectile.shape,
+                   "projectile_size": m.geometry.bound if m.has_body else 0.0,
                    "has_projectile": int(m.has_body)},
         )
+
+    def _surface_variables(self) -> dict:
+        """The projectile's surface mesh (body frame), for plots and animations."""
+        if self._surface is None:
+            return {}
+        pts, tris = self._surface
+        return {
+            "projectile_surface": (("surface_point", "xyz"), pts,
+                                   {"units": "m", "long_name":
+                                    "projectile surface points relative to the centre of "
+                                    "mass, body frame"}),
+            "projectile_surface_triangles": (("surface_triangle", "corner"), tris,
+                                             {"units": "1", "long_name":
+                                              "projectile surface triangles (point indices)"}),
+        }
 
     def flush(self, attrs: dict[str, str]) -> None:
         """Append the snapshots taken since the last flush to snapshots.nc (created with
@@ -126,12 +148,13 @@ class Snapshots:
         )
         write_atomic(folder / f"fabric_{k:05d}.vtu", lambda tmp: meshio.write(
             tmp, mesh, file_format="vtu", binary=True, compression=None))
-        if self._sphere is not None:
-            pts, tris = self._sphere
+        if self._surface is not None:
+            pts, tris = self._surface
             rot = b[BODY_R0:BODY_R0 + 3]
             nose = rot @ m.body.nose
             world = pts @ rot.T + b[BODY_X]
-            along = (pts @ (m.body.nose / np.linalg.norm(m.body.nose))) / m.body.radius
+            # +1 at the nose, −1 opposite: how each surface point lies along the nose axis
+            along = (pts @ (m.body.nose / np.linalg.norm(m.body.nose))) / m.geometry.bound
             body_mesh = meshio.Mesh(
                 points=world, cells=[("triangle", tris)],
                 point_data={"nose_alignment": along,
@@ -151,34 +174,6 @@ class Snapshots:
         lines += ["  </Collection>", "</VTKFile>", ""]
         text = "\n".join(lines)
         write_atomic(self.out_dir / f"{stem}.pvd", lambda tmp: tmp.write_text(text))
-
-
-def _sphere_mesh(radius: float, n_lat: int = 12, n_lon: int = 24):
-    """A UV-sphere surface (points relative to the centre, triangles)."""
-    pts = [[0.0, 0.0, radius]]
-    for i in range(1, n_lat):
-        th = np.pi * i / n_lat
-        for j in range(n_lon):
-            ph = 2 * np.pi * j / n_lon
-            pts.append([radius * np.sin(th) * np.cos(ph), radius * np.sin(th) * np.sin(ph),
-                        radius * np.cos(th)])
-    pts.append([0.0, 0.0, -radius])
-    pts = np.array(pts)
-    tris = []
-    south = len(pts) - 1
-    for j in range(n_lon):
-        tris.append([0, 1 + j, 1 + (j + 1) % n_lon])
-    for i in range(n_lat - 2):
-        a0 = 1 + i * n_lon
-        b0 = a0 + n_lon
-        for j in range(n_lon):
-            a, b = a0 + j, a0 + (j + 1) % n_lon
-            c, d = b0 + j, b0 + (j + 1) % n_lon
-            tris += [[a, c, b], [b, c, d]]
-    last = 1 + (n_lat - 2) * n_lon
-    for j in range(n_lon):
-        tris.append([last + j, south, last + (j + 1) % n_lon])
-    return pts, np.array(tris, dtype=np.int64)
 
 
 def snapshot_times(path: Path, count: int) -> list[float]:
