@@ -189,8 +189,8 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work):
     the shared corrections converge to the full ones. As for nodes, a segment in contact
     earlier in the step keeps its contact within shapes.contact_margin outside the surface
     (impulse, no move). Each node sums its warp and its fill contributions apart: the result
-    does not depend on the order of the segments, so mirror images stay mirror images. Appends the contacts
-    after the first nc; returns the new count.
+    does not depend on the order of the segments, so mirror images stay mirror images.
+    Appends the contacts after the first nc; returns the new count.
     """
     inv_mass = nodes.inv_mass
     ends = yarns.ends
