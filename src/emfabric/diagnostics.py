@@ -28,7 +28,8 @@ RECORD: dict[str, tuple[int, str, str]] = {
     "angular_velocity": (3, "rad s-1", "projectile angular velocity (inertial frame)"),
     "projectile_nose": (3, "m", "nose marker relative to the centre of mass"),
     "tilt": (1, "rad", "tilt angle of the nose marker (eq. 5.2)"),
-    "contact_nodes": (1, "1", "fabric nodes in contact"),
+    "contact_nodes": (1, "1", "fabric nodes in contact (plus yarn segments in contact, with "
+                              "segment contact on)"),
     "max_deflection": (1, "m", "largest out-of-plane node displacement"),
     "max_stretch": (1, "1", "largest yarn stretch U = L/L0"),
     "fabric_momentum": (3, "kg m s-1", "linear momentum of the fabric"),

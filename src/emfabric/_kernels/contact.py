@@ -14,7 +14,12 @@ import math
 from numba import njit
 
 from emfabric._kernels.records import BODY_R0, BODY_V, BODY_W, BODY_X
-from emfabric._kernels.shapes import contact_margin, pressing_point, surface_point
+from emfabric._kernels.shapes import (
+    bounding_radius,
+    contact_margin,
+    pressing_point,
+    surface_point,
+)
 from emfabric._kernels.vec3 import cross
 
 
@@ -184,8 +189,9 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work):
     that node (the smaller share of its two nodes): the corrections a node receives never add
     up to more than one full correction (no overshoot), and the share varies continuously as a
     segment enters or leaves the body (a count would jump, and the fixed-point iteration would
-    cycle). The pass is repeated (SEGMENT_SWEEPS times at most, until no segment is in contact)
-    on the corrected positions and velocities, each contact's impulses adding up, so that
+    cycle). The pass is repeated on the corrected positions and velocities for the segments in
+    contact (SEGMENT_SWEEPS times at most, until none is inside and no contact point's velocity
+    changes by more than 10⁻⁹ of the body's speed), each contact's impulses adding up, so that
     the shared corrections converge to the full ones. As for nodes, a segment in contact
     earlier in the step keeps its contact within shapes.contact_margin outside the surface
     (impulse, no move). Each node sums its warp and its fill contributions apart: the result
@@ -205,7 +211,12 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work):
     rot = b_state[BODY_R0:BODY_R0 + 3]
     for idx in range(nseg):
         slot[idx] = -1
-    for _sweep in range(SEGMENT_SWEEPS):
+    # a velocity change below this at every contact point ends the sweeps [m/s]
+    settled = 1e-9 * (math.sqrt(vel[0] * vel[0] + vel[1] * vel[1] + vel[2] * vel[2])
+                      + bounding_radius(body) * math.sqrt(omega[0] * omega[0]
+                                                          + omega[1] * omega[1]
+                                                          + omega[2] * omega[2]))
+    for sweep in range(SEGMENT_SWEEPS):
         for idx in range(nseg):
             for node in (ends[seg_cand[idx], 0], ends[seg_cand[idx], 1]):
                 for f in range(2):
@@ -214,12 +225,25 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work):
                         for c in range(3):
                             acc[q, f, c, node] = 0.0
         found = 0
+        inside_count = 0
         for idx in range(nseg):
             tmp[6, idx] = 0.0
+            # after the first pass only the segments already in contact are revisited
+            if sweep > 0 and slot[idx] < 0:
+                continue
             s = seg_cand[idx]
             a = ends[s, 0]
             b = ends[s, 1]
-            wa, wb, d = _segment_point(x1, a, b, centre, body, rot)
+            if sweep == 0:
+                wa, wb, d = _segment_point(x1, a, b, centre, body, rot)
+            else:
+                # the same material point of the segment as in the first pass, so that each
+                # node's share of the summed impulse is w J with one w (energy and moments)
+                wa = c_w[0, slot[idx]]
+                wb = c_w[1, slot[idx]]
+                d = (wa * (x1[0, a] - centre[0]) + wb * (x1[0, b] - centre[0]),
+                     wa * (x1[1, a] - centre[1]) + wb * (x1[1, b] - centre[1]),
+                     wa * (x1[2, a] - centre[2]) + wb * (x1[2, b] - centre[2]))
             k = wa * wa * inv_mass[a] + wb * wb * inv_mass[b]
             if not k > 0.0:
                 continue
@@ -250,12 +274,15 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work):
             # segment enters (g = 0) and leaves (g = keep)
             dep = keep - g
             tmp[6, idx] = dep
+            if g < 0.0:
+                inside_count += 1
             fam = 0 if b - a == 1 else 1
             share[fam, a] += dep
             share[fam, b] += dep
             found += 1
         if found == 0:
             break
+        worst = 0.0
         for idx in range(nseg):
             dep = tmp[6, idx]
             if dep == 0.0:
@@ -274,6 +301,8 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work):
             move = scale / k if dep > keep else 0.0
             for c in range(3):
                 c_imp[c, kc] += scale * tmp[c, idx]
+            worst = max(worst, scale * k * math.sqrt(tmp[0, idx] ** 2 + tmp[1, idx] ** 2
+                                                     + tmp[2, idx] ** 2))
             for node, w in ((a, wa), (b, wb)):
                 wi = w * inv_mass[node]
                 for c in range(3):
@@ -287,6 +316,8 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work):
                         v1[c, node] += acc[1, 0, c, node] + acc[1, 1, c, node]
                     share[0, node] = 0.0
                     share[1, node] = 0.0
+        if inside_count == 0 and worst <= settled:
+            break
     # the body's reaction acts where the fabric point now is (the node, or w_a x_a + w_b x_b):
     # the moments the two receive are then exactly opposite, about any point
     for kc in range(nc):
