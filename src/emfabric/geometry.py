@@ -155,7 +155,15 @@ class ShapeGeometry:
         ymax = self.flat_half_width + (self.length - s) * math.tan(self.bevel)
         x = self.radius * np.cos(th)[None, :]
         y = np.clip(self.radius * np.sin(th)[None, :], -ymax[:, None], ymax[:, None])
-        return float((x * d[0] + y * d[1] + (s - self.base)[:, None] * d[2]).max())
+        best = float((x * d[0] + y * d[1] + (s - self.base)[:, None] * d[2]).max())
+        # the corners where a chisel face meets the cylinder, exactly
+        yc = np.minimum(ymax, self.radius)
+        xc = np.sqrt(self.radius**2 - yc**2)
+        for sx in (1.0, -1.0):
+            for sy in (1.0, -1.0):
+                best = max(best, float((sx * xc * d[0] + sy * yc * d[1]
+                                        + (s - self.base) * d[2]).max()))
+        return best
 
     # ---- surface ----------------------------------------------------------------------------
     def mesh(self, n_az: int = 48, n_axial: int = 24) -> tuple[np.ndarray, np.ndarray]:

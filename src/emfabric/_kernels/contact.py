@@ -1,7 +1,7 @@
 """Node–body contact with stick/slip friction as an impulse exchange (section 4, eqs. 4.5–4.11).
 
 A node predicted inside the body is moved to the closest surface point (4.5, 5.1; the shape's
-``closest_surface_point``); this projection carries no momentum. ``contact_impulse`` is the
+``surface_point``); this projection carries no momentum. ``contact_impulse`` is the
 contact law: the node is first made to stick to the body's surface point velocity v_cm + ω × r
 (4.6, 4.9); the velocity jump times the node mass is the contact impulse J. Its normal part
 never pulls (a separating node is let go); if the tangential part exceeds μ_s times the normal
@@ -82,12 +82,17 @@ def find_segment_candidates(yarns, alpha, broken_below, x, inv_mass, centre, rea
         b = ends[s, 1]
         if (inv_mass[a] == 0.0 and inv_mass[b] == 0.0) or alpha[s] <= broken_below:
             continue
-        ax, ay, az = x[0, a] - centre[0], x[1, a] - centre[1], x[2, a] - centre[2]
-        ex, ey, ez = x[0, b] - x[0, a], x[1, b] - x[1, a], x[2, b] - x[2, a]
-        ee = ex * ex + ey * ey + ez * ez
-        t = -(ax * ex + ay * ey + az * ez) / ee if ee > 0.0 else 0.0
-        t = min(max(t, 0.0), 1.0)
-        px, py, pz = ax + t * ex, ay + t * ey, az + t * ez
+        # from the midpoint, odd in the half-vector: the same test read from either end
+        mx = 0.5 * (x[0, a] + x[0, b]) - centre[0]
+        my = 0.5 * (x[1, a] + x[1, b]) - centre[1]
+        mz = 0.5 * (x[2, a] + x[2, b]) - centre[2]
+        hx = 0.5 * (x[0, b] - x[0, a])
+        hy = 0.5 * (x[1, b] - x[1, a])
+        hz = 0.5 * (x[2, b] - x[2, a])
+        hh = hx * hx + hy * hy + hz * hz
+        t = -(mx * hx + my * hy + mz * hz) / hh if hh > 0.0 else 0.0
+        t = min(max(t, -1.0), 1.0)
+        px, py, pz = mx + t * hx, my + t * hy, mz + t * hz
         if px * px + py * py + pz * pz < r2:
             seg_cand[count] = s
             work.seg_active[count] = 0
@@ -97,6 +102,9 @@ def find_segment_candidates(yarns, alpha, broken_below, x, inv_mass, centre, rea
                     flag[node] = 1
                     cand[ncand] = node
                     ncand += 1
+    # in node order, as find_candidates gives them: the error terms are then added in the same
+    # order in a mirrored run
+    cand[:ncand].sort()
     return ncand, count
 
 

@@ -191,7 +191,7 @@ class Work(NamedTuple):
     seg_tmp: np.ndarray
     """One segment-contact pass: impulse, move to the surface and weight, (7, seg_count)."""
     counts: np.ndarray
-    """[candidate nodes, candidate segments, node contacts, segment contacts] (int64)."""
+    """[candidate nodes, candidate segments] of the current attempt (int64)."""
     v_pre: np.ndarray
     """Candidates' velocity before contact [m/s], (3, node_count)."""
     share: np.ndarray
@@ -225,7 +225,7 @@ def make_work(nx: int, ny: int, seg_count: int = 0) -> Work:
                 np.empty(max(seg_count, 1), dtype=np.int64),
                 np.zeros(max(seg_count, 1), dtype=np.int8),
                 np.empty(max(seg_count, 1), dtype=np.int64), np.zeros((7, max(seg_count, 1))),
-                np.zeros(4, dtype=np.int64),
+                np.zeros(2, dtype=np.int64),
                 np.empty((3, n)), np.zeros((2, n)), np.zeros((2, 2, 3, n)),
                 np.empty(nmax, dtype=np.int64), np.empty(nmax, dtype=np.int64),
                 np.empty((2, nmax)), np.empty((3, nmax)), np.empty((3, nmax)),

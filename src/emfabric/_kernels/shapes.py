@@ -80,7 +80,8 @@ def _local_closest(body, q):
                 p = (0.0, 0.0, big_l - body.base)
                 n = (0.0, 0.0, 1.0)
         elif gi > g:
-            ns, nr = (ds / h, dr / h) if h > 0.0 else (1.0, 0.0)
+            # h = 0 only on the axis of a hemispherical nose's base circle: the side point
+            ns, nr = (ds / h, dr / h) if h > 0.0 else (0.0, 1.0)
             pr = big_r - rho + rho * nr
             g = gi
             # below the nose (ds = 0, ns = 0) the side point keeps the height s
@@ -115,8 +116,10 @@ def _local_closest(body, q):
 def surface_point(body, rot, d):
     """(g, r, n) for a point at d: g < 0 inside the body (−g the distance to the surface),
     r the surface point it projects to (relative to the centre, inertial frame) and n the
-    outward unit normal there. Exact for a point inside; for a point outside, g and r belong
-    to the nearest constraint surface (exact near a face, where contact uses it)."""
+    outward unit normal there. Exact for a point inside. For a point outside, g and r belong to
+    the most violated constraint: exact for a point just outside a face, which is where contact
+    uses it (a contact kept within shapes.contact_margin); farther out, e.g. beyond the ogive's
+    tip, r may lie on that constraint's surface off the body."""
     if body.shape == SHAPE_SPHERE:
         return _sphere_surface(body.radius, d)
     g, p, n = _local_closest(body, to_shape_frame(rot, body.frame, d))
