@@ -6,6 +6,7 @@ import os
 
 import numpy as np
 
+from emfabric._kernels.coils import WAVE_CONSTANT, WAVE_DAMPED_SINE, WAVE_RAMP, WAVE_TABLE
 from emfabric._kernels.records import (
     BODY_R0,
     BODY_ROWS,
@@ -157,7 +158,6 @@ def build_model(scenario: Scenario) -> Model:
     if segments == "auto":
         segments = geo.kind != "sphere"
 
-    fld = scenario.field
     physics = Physics(
         nodes=Nodes(nx, ny, node_x0, node_mass, node_inv_mass, node_charge),
         yarns=Yarns(
@@ -175,13 +175,7 @@ def build_model(scenario: Scenario) -> Model:
             damage_rate=float(fab.damage.rate),
             broken_below=float(fab.damage.broken_below),
         ),
-        field=Field(
-            E=np.asarray(fld.E, dtype=float),
-            B=np.asarray(fld.B, dtype=float),
-            region=REGION_UNIFORM if fld.region == "uniform" else REGION_HALF_SPACE,
-            z0=float(fld.z0),
-            gravity=np.asarray(fld.gravity, dtype=float),
-        ),
+        field=build_field(scenario),
         body=Body(
             active=has_body,
             shape=SHAPES.get(pr.shape, SHAPE_SPHERE),  # "none": no body, shape unused
@@ -217,6 +211,68 @@ def build_model(scenario: Scenario) -> Model:
     check_geometry(model)
     check_stability(model)
     return model
+
+
+SOLENOID_MAX_LOOPS = 200
+"""A solenoid of more turns is this many loops, each carrying current × turns / loops."""
+WIRE_FRACTION = 0.01
+"""Default wire radius of a loop or solenoid, as a fraction of its radius."""
+
+
+def build_field(scenario: Scenario) -> Field:
+    """The Field record of a scenario: the uniform part (field.E, field.B and the "uniform"
+    sources, summed) and the current loops (a solenoid is a row of loops), each with its
+    waveform. Needs no fabric (``emfabric field`` uses it alone)."""
+    fld = scenario.field
+    e = np.asarray(fld.E, dtype=float)
+    b = np.asarray(fld.B, dtype=float)
+    loops, waves, tables = [], [], []
+    kinds = {"constant": WAVE_CONSTANT, "ramp": WAVE_RAMP, "damped-sine": WAVE_DAMPED_SINE,
+             "table": WAVE_TABLE}
+    for i, src in enumerate(fld.sources):
+        if src.kind == "uniform":
+            e = e + np.asarray(src.E, dtype=float)
+            b = b + np.asarray(src.B, dtype=float)
+            continue
+        direction = np.asarray(src.normal if src.kind == "loop" else src.axis, dtype=float)
+        size = float(np.linalg.norm(direction))
+        if not size > 0.0:
+            key = "normal" if src.kind == "loop" else "axis"
+            raise ScenarioError(f"field.sources[{i}].{key} = {list(direction)}: allowed: a "
+                                f"non-zero vector")
+        n = direction / size
+        wire = src.wire_radius if src.wire_radius is not None else WIRE_FRACTION * src.radius
+        if src.kind == "loop":
+            centres, per_loop = [np.asarray(src.centre, dtype=float)], float(src.turns)
+        else:
+            count = min(src.turns, SOLENOID_MAX_LOOPS)
+            offsets = (np.arange(count) + 0.5) / count - 0.5
+            centres = [np.asarray(src.centre, dtype=float) + o * src.length * n
+                       for o in offsets]
+            per_loop = src.turns / count
+        amp = per_loop * (src.current if src.current is not None else 1.0)
+        wave = [kinds[src.waveform], amp, src.start_time, src.rise_time or 0.0,
+                src.frequency or 0.0, src.decay_time or 1.0]
+        table = np.asarray(src.table if src.table is not None else [(0.0, 0.0)], dtype=float)
+        for c in centres:
+            loops.append([*c, *n, src.radius, wire])
+            waves.append(wave)
+            tables.append(table)
+    width = max((len(tb) for tb in tables), default=1)
+    padded = np.zeros((len(tables), width, 2))
+    for k, tb in enumerate(tables):
+        padded[k, :len(tb)] = tb
+    return Field(
+        E=e,
+        B=b,
+        region=REGION_UNIFORM if fld.region == "uniform" else REGION_HALF_SPACE,
+        z0=float(fld.z0),
+        gravity=np.asarray(fld.gravity, dtype=float),
+        loops=np.asarray(loops, dtype=float).reshape(-1, 8) if loops else None,
+        currents=np.asarray(waves, dtype=float).reshape(-1, 6),
+        tables=padded,
+        table_len=np.array([len(tb) for tb in tables], dtype=np.int64),
+    )
 
 
 def check_geometry(model: Model) -> None:

@@ -223,6 +223,67 @@ def new(
     emit(_load(scenario, set_).to_commented_toml())
 
 
+def _points(args: list[str]) -> list[tuple[float, float, float]]:
+    """The points of repeated `--at X Y Z` options (Typer has no repeated three-value option)."""
+    import math
+
+    points, k = [], 0
+    while k < len(args):
+        if args[k] != "--at":
+            raise ValueError(f"unexpected argument {args[k]!r}; allowed: --at X Y Z, --time T, "
+                             f"--set KEY=VALUE")
+        vals = args[k + 1:k + 4]
+        try:
+            p = tuple(float(v) for v in vals)
+        except ValueError:
+            p = ()
+        if len(p) != 3 or not all(math.isfinite(c) for c in p):
+            raise ValueError(f"--at {' '.join(vals)}: allowed: three finite numbers X Y Z [m]")
+        points.append(p)
+        k += 4
+    return points
+
+
+@app.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
+def field(
+    ctx: typer.Context,
+    scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name")],
+    time: Annotated[float, typer.Option("--time", help="Time [s]")] = 0.0,
+    set_: Annotated[list[str] | None, typer.Option("--set", help="Override a value")] = None,
+) -> None:
+    """The applied field E [V/m] and B [T] at points given as --at X Y Z (repeat for more), as
+    JSON on stdout: {"E": [..], "B": [..]} for one point, a list of {"at", "E", "B"} for
+    several."""
+    import math
+
+    sc = _load(scenario, set_)
+    try:
+        at = _points(list(ctx.args))
+    except ValueError as err:
+        error(str(err))
+        raise typer.Exit(2) from None
+    if not at:
+        error("give at least one point: --at X Y Z")
+        raise typer.Exit(2)
+    if not math.isfinite(time):
+        error(f"--time {time}: allowed: a finite time [s]")
+        raise typer.Exit(2)
+    from emfabric.builder import build_field
+    from emfabric.fields import fields_at
+
+    try:
+        fld = build_field(sc)
+    except ScenarioError as err:
+        error(str(err))
+        raise typer.Exit(2) from None
+    e, b = fields_at(fld, at, time)
+    rows = [{"at": list(p), "E": e[k].tolist(), "B": b[k].tolist()} for k, p in enumerate(at)]
+    if len(rows) == 1:
+        emit(json.dumps({"E": rows[0]["E"], "B": rows[0]["B"]}))
+    else:
+        emit(json.dumps(rows))
+
+
 @app.command()
 def scenarios() -> None:
     """List the built-in scenarios."""

@@ -161,17 +161,113 @@ class Projectile(_Section):
         return self
 
 
-class FieldSpec(_Section):
+class _Current(_Section):
+    """A source carrying a current, and how the current runs in time."""
+
+    current: FiniteFloat | None = None
+    """Current [A] (per turn); not with waveform = "table"."""
+    turns: Annotated[int, Field(ge=1, le=100000)] = 1
+    """Number of turns [-]."""
+    waveform: Literal["constant", "ramp", "damped-sine", "table"] = "constant"
+    """I(t): "constant"; "ramp" (0 → current over rise_time from start_time); "damped-sine"
+    (current·exp(−u/decay_time)·sin(2π frequency u), u = t − start_time ≥ 0); "table"."""
+    start_time: FiniteFloat = 0.0
+    """When "ramp" and "damped-sine" start [s] (zero current before)."""
+    rise_time: PositiveFloat | None = None
+    """Duration of the "ramp" [s]."""
+    frequency: PositiveFloat | None = None
+    """Frequency of the "damped-sine" [Hz]."""
+    decay_time: PositiveFloat | None = None
+    """Decay time of the "damped-sine" [s]."""
+    table: tuple[tuple[FiniteFloat, FiniteFloat], ...] | None = None
+    """"table": [[t, I], ...] [s, A], t increasing; linear between points, held outside."""
+    wire_radius: PositiveFloat | None = None
+    """Radius of the wire [m] (default 1 % of the loop radius): within it the field is that of
+    the wire's surface scaled by the distance to its centre line, finite."""
+
+    @model_validator(mode="after")
+    def _waveform_keys(self) -> _Current:
+        needs = {"constant": (), "ramp": ("rise_time",), "damped-sine": ("frequency",
+                                                                          "decay_time"),
+                 "table": ("table",)}[self.waveform]
+        for key in needs:
+            if getattr(self, key) is None:
+                raise ValueError(f'waveform = "{self.waveform}" needs {key}')
+        for key in ("rise_time", "frequency", "decay_time", "table"):
+            if key not in needs and getattr(self, key) is not None:
+                raise ValueError(f'{key} is not used by waveform = "{self.waveform}"')
+        if self.waveform == "table":
+            if self.current is not None:
+                raise ValueError('current is not used with waveform = "table" (the table '
+                                 'holds the current)')
+            times = [p[0] for p in self.table]
+            if len(times) < 2 or any(b <= a for a, b in zip(times, times[1:], strict=False)):
+                raise ValueError(f"table = {[list(p) for p in self.table]}: allowed: at least "
+                                 f"two [t, I] points with t increasing")
+        elif self.current is None:
+            raise ValueError("current [A] is needed")
+        return self
+
+
+class LoopSource(_Current):
+    kind: Literal["loop"]
+    """A circular current loop (exact field, elliptic integrals)."""
+    centre: FiniteVec3
+    """Centre of the loop [m]."""
+    normal: FiniteVec3
+    """Normal of the loop's plane; the current circulates right-handed about it."""
+    radius: PositiveFloat
+    """Loop radius [m]."""
+
+
+class SolenoidSource(_Current):
+    kind: Literal["solenoid"]
+    """A finite solenoid: `turns` loops evenly spaced over `length` (at most 200 loops, each
+    then carrying current × turns/200)."""
+    centre: FiniteVec3
+    """Centre of the solenoid [m]."""
+    axis: FiniteVec3
+    """Axis; the current circulates right-handed about it."""
+    radius: PositiveFloat
+    """Radius [m]."""
+    length: PositiveFloat
+    """Length [m]."""
+
+
+class UniformSource(_Section):
+    kind: Literal["uniform"]
+    """A uniform field (added to field.E and field.B)."""
     E: FiniteVec3 = (0.0, 0.0, 0.0)
     """Electric field [V/m]."""
-    B: FiniteVec3 = (0.05, 0.0, 0.0)
+    B: FiniteVec3 = (0.0, 0.0, 0.0)
     """Magnetic field [T]."""
+
+
+Source = Annotated[UniformSource | LoopSource | SolenoidSource, Field(discriminator="kind")]
+
+
+class FieldSpec(_Section):
+    E: FiniteVec3 = (0.0, 0.0, 0.0)
+    """Electric field [V/m] (uniform)."""
+    B: FiniteVec3 = (0.05, 0.0, 0.0)
+    """Magnetic field [T] (uniform; 0 by default when sources are given)."""
     region: Literal["uniform", "half-space"] = "uniform"
     """Where the field acts: "uniform" (everywhere) or "half-space" (z < z0)."""
     z0: FiniteFloat = 0.0
     """With region = "half-space": the field acts where z < z0 [m]."""
     gravity: FiniteVec3 = (0.0, 0.0, 0.0)
     """Gravitational acceleration [m/s²] (off by default)."""
+    sources: tuple[Source, ...] = ()
+    """Field sources, summed with the uniform E, B above: kind = "uniform" | "loop" |
+    "solenoid" (docs/fields.md)."""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _no_default_uniform_with_sources(cls, data: Any) -> Any:
+        # with sources, only what is written acts: the paper's default B = 0.05 e_x is not added
+        if isinstance(data, dict) and data.get("sources") and "B" not in data:
+            data = {**data, "B": (0.0, 0.0, 0.0)}
+        return data
 
 
 class Contact(_Section):
@@ -483,6 +579,10 @@ def apply_overrides(scenario: Scenario, overrides: dict[str, Any]) -> Scenario:
     if not overrides:
         return scenario
     data = copy.deepcopy(scenario.to_dict())
+    if ("field.sources" in overrides and "field.B" not in overrides
+            and "B" not in scenario.field.model_fields_set):
+        # as in a file: with sources, the uniform B is only what is written (FieldSpec)
+        data.setdefault("field", {}).pop("B", None)
     for key, value in overrides.items():
         parts = key.split(".")
         node = data

@@ -1,11 +1,19 @@
 """The applied field, one function: ``field_at(fld, x, t) -> (E, B)``; and the Lorentz force.
 
+The field is the uniform part (E, B, optionally confined to z < z0) plus the current loops that
+coils are made of, each with its current waveform I(t) (emfabric._kernels.coils).
+
 Every kernel that needs the field at a point (node update, body wrench, energy bookkeeping)
 calls field_at; a new field source is a new branch here and a new scenario entry.
 """
 
-from numba import njit
+import math
 
+from numba import njit
+from numba.core import types
+from numba.extending import overload
+
+from emfabric._kernels.coils import WAVE_CONSTANT, current_at, loop_unit_field
 from emfabric._kernels.records import REGION_HALF_SPACE
 
 _ZERO = (0.0, 0.0, 0.0)
@@ -20,13 +28,76 @@ def field_at(fld, x, t):
     w = 1.0 if (fld.region != REGION_HALF_SPACE or x[2] < fld.z0) else 0.0
     e = fld.E
     b = fld.B
-    return (w * e[0], w * e[1], w * e[2]), (w * b[0], w * b[1], w * b[2])
+    eu = (w * e[0], w * e[1], w * e[2])
+    bu = (w * b[0], w * b[1], w * b[2])
+    return loop_fields(fld.loops, fld.currents, fld.tables, fld.table_len, x, t, eu, bu)
+
+
+def loop_fields(loops, currents, tables, table_len, x, t, e, b):
+    """e, b plus the fields of the current loops; loops None: e, b unchanged.
+
+    Compiled code gets one of two implementations chosen by the type of `loops` when it is
+    compiled (the overload below): for None (no loops, the paper's case) nothing at all, so
+    that the node kernel's loops stay vectorised; else _sum_loops. Called from Python, this
+    body does the same."""
+    if loops is None:
+        return e, b
+    return _sum_loops(loops, currents, tables, table_len, x, t, e, b)
+
+
+@overload(loop_fields, inline="always")
+def _loop_fields_typed(loops, currents, tables, table_len, x, t, e, b):
+    if isinstance(loops, types.NoneType):
+        def no_loops(loops, currents, tables, table_len, x, t, e, b):
+            return e, b
+        return no_loops
+
+    def with_loops(loops, currents, tables, table_len, x, t, e, b):
+        return _sum_loops(loops, currents, tables, table_len, x, t, e, b)
+    return with_loops
+
+
+@njit(cache=True)
+def _sum_loops(loops, currents, tables, table_len, x, t, e, b):
+    """e, b plus the fields of the current loops (coils are sums of loops): B from each loop's
+    current I(t), and the induced E = −(dI/dt) A_φ φ̂ (emfabric._kernels.coils)."""
+    ex, ey, ez = e
+    bx, by, bz = b
+    for k in range(loops.shape[0]):
+        current, rate = current_at(currents[k], tables[k], table_len[k], t)
+        if current == 0.0 and rate == 0.0:
+            continue
+        lp = loops[k]
+        dx, dy, dz = x[0] - lp[0], x[1] - lp[1], x[2] - lp[2]
+        nx, ny, nz = lp[3], lp[4], lp[5]
+        z = dx * nx + dy * ny + dz * nz
+        rx, ry, rz = dx - z * nx, dy - z * ny, dz - z * nz
+        rho = math.sqrt(rx * rx + ry * ry + rz * rz)
+        b_rho, b_ax, a_phi = loop_unit_field(lp[6], lp[7], rho, z)
+        if rho > 0.0:
+            ux, uy, uz = rx / rho, ry / rho, rz / rho
+        else:
+            ux, uy, uz = 0.0, 0.0, 0.0
+        bx += current * (b_rho * ux + b_ax * nx)
+        by += current * (b_rho * uy + b_ax * ny)
+        bz += current * (b_rho * uz + b_ax * nz)
+        # φ̂ = n × ρ̂
+        ex -= rate * a_phi * (ny * uz - nz * uy)
+        ey -= rate * a_phi * (nz * ux - nx * uz)
+        ez -= rate * a_phi * (nx * uy - ny * ux)
+    return (ex, ey, ez), (bx, by, bz)
 
 
 @njit(cache=True, inline="always")
 def has_electric_field(fld):
-    """Whether E can be non-zero anywhere (the energy bookkeeping skips field work if not)."""
-    return fld.E[0] != 0.0 or fld.E[1] != 0.0 or fld.E[2] != 0.0
+    """Whether E can be non-zero anywhere (the energy bookkeeping skips field work if not):
+    a uniform E, or a loop whose current changes in time (its induced E)."""
+    if fld.E[0] != 0.0 or fld.E[1] != 0.0 or fld.E[2] != 0.0:
+        return True
+    for k in range(fld.currents.shape[0]):
+        if int(fld.currents[k, 0]) != WAVE_CONSTANT:
+            return True
+    return False
 
 
 @njit(cache=True, inline="always")

@@ -85,6 +85,17 @@ class Field(NamedTuple):
     z0: float
     gravity: np.ndarray
     """[m/s²], (3,)."""
+    loops: np.ndarray | None = None
+    """Current loops (coils are sums of loops), (loop_count, 8): centre [m], unit normal (the
+    current circulates right-handed about it), radius [m], wire radius [m]; None without loops
+    (then Numba compiles the loop sum away)."""
+    currents: np.ndarray = np.zeros((0, 6))
+    """Each loop's current waveform, (loop_count, 6): kind (coils.WAVE_*), amplitude = current ×
+    turns [A], start_time, rise_time [s], frequency [Hz], decay_time [s]."""
+    tables: np.ndarray = np.zeros((0, 1, 2))
+    """Waveform tables (t [s], I [A]) per loop, padded, (loop_count, points, 2)."""
+    table_len: np.ndarray = np.zeros(0, dtype=np.int64)
+    """Points used in each loop's table."""
 
 
 class Body(NamedTuple):

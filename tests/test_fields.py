@@ -1,0 +1,264 @@
+"""Field sources (issue 13): current loops and solenoids against closed forms and an independent
+Biot–Savart sum, Maxwell's equations by finite differences, Faraday's law for a ramped current,
+waveforms, superposition, energy in a static non-uniform field, and `emfabric field`."""
+
+import json
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from emfabric._kernels.coils import MU0, current_at, elliptic_ke
+from emfabric.builder import build_field
+from emfabric.fields import fields_at
+from emfabric.runner import run
+from emfabric.scenario import ScenarioError
+
+from conftest import fabric_only, make
+
+A, I0, TURNS = 0.05, 1000.0, 3
+CENTRE = np.array([0.01, -0.02, -0.1])
+NORMAL = np.array([0.3, 0.2, 1.0]) / np.linalg.norm([0.3, 0.2, 1.0])
+
+
+def _loop(**kw):
+    src = {"kind": "loop", "centre": list(CENTRE), "normal": list(NORMAL), "radius": A,
+           "current": I0, "turns": TURNS, **kw}
+    return make(**{"field.sources": [src]})
+
+
+def _biot_savart(points, centre, normal, radius, current, n=20000):
+    """Independent numerical Biot–Savart sum over n straight pieces of the loop."""
+    e1 = np.cross(normal, [1.0, 0.0, 0.0])
+    if np.linalg.norm(e1) < 1e-6:
+        e1 = np.cross(normal, [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(normal, e1)
+    th = (np.arange(n) + 0.5) * 2 * np.pi / n
+    mid = centre + radius * (np.outer(np.cos(th), e1) + np.outer(np.sin(th), e2))
+    dl = (2 * np.pi * radius / n) * (np.outer(-np.sin(th), e1) + np.outer(np.cos(th), e2))
+    out = []
+    for p in np.atleast_2d(points):
+        r = p - mid
+        out.append(MU0 * current / (4 * np.pi)
+                   * np.sum(np.cross(dl, r) / np.linalg.norm(r, axis=1)[:, None] ** 3, axis=0))
+    return np.array(out)
+
+
+def test_elliptic_integrals_special_values():
+    k, e = elliptic_ke(0.0)
+    assert k == pytest.approx(math.pi / 2, rel=1e-15) and e == pytest.approx(math.pi / 2)
+    # K(1/2) = Γ(1/4)² / (4 √π), E(1/2) = (K² + π/2)/(2K) (Legendre's relation at k² = 1/2)
+    k, e = elliptic_ke(0.5)
+    k_ref = math.gamma(0.25) ** 2 / (4 * math.sqrt(math.pi))
+    assert k == pytest.approx(k_ref, rel=1e-14)
+    assert e == pytest.approx((k_ref**2 + math.pi / 2) / (2 * k_ref), rel=1e-14)
+
+
+def test_loop_on_axis_closed_form():
+    """B = μ₀ N I R² / (2 (R² + z²)^{3/2}) along the normal on the axis."""
+    fld = build_field(_loop())
+    z = np.array([-0.3, -0.05, 0.0, 0.02, 0.1, 0.4])
+    _, b = fields_at(fld, CENTRE + np.outer(z, NORMAL))
+    exact = MU0 * TURNS * I0 * A**2 / (2 * (A**2 + z**2) ** 1.5)
+    np.testing.assert_allclose(b, np.outer(exact, NORMAL), rtol=1e-13, atol=1e-18)
+
+
+def test_loop_off_axis_against_biot_savart():
+    rng = np.random.default_rng(2)
+    pts = CENTRE + rng.uniform(-0.12, 0.12, (12, 3))
+    # keep away from the wire (the sum has a 1/n error that grows near it)
+    fld = build_field(_loop())
+    _, b = fields_at(fld, pts)
+    ref = _biot_savart(pts, CENTRE, NORMAL, A, TURNS * I0)
+    np.testing.assert_allclose(b, ref, rtol=2e-6, atol=1e-12 * np.abs(ref).max())
+
+
+def test_divergence_and_curl_vanish_away_from_the_wire():
+    fld = build_field(_loop())
+    h = 1e-5
+    rng = np.random.default_rng(4)
+    for p in CENTRE + rng.uniform(-0.1, 0.1, (8, 3)):
+        grad = np.empty((3, 3))  # grad[i, j] = ∂B_j/∂x_i
+        for i in range(3):
+            d = np.zeros(3)
+            d[i] = h
+            _, bb = fields_at(fld, [p + d, p - d])
+            grad[i] = (bb[0] - bb[1]) / (2 * h)
+        scale = np.abs(grad).max()
+        assert abs(np.trace(grad)) < 1e-6 * scale
+        curl = np.array([grad[1, 2] - grad[2, 1], grad[2, 0] - grad[0, 2],
+                         grad[0, 1] - grad[1, 0]])
+        assert np.abs(curl).max() < 1e-6 * scale
+
+
+def test_field_is_finite_at_and_near_the_wire():
+    """On the wire's centre line and inside the wire radius the field stays finite and
+    continuous at the wire's surface."""
+    fld = build_field(_loop(wire_radius=1e-3))
+    e1 = np.cross(NORMAL, [1.0, 0, 0])
+    e1 /= np.linalg.norm(e1)
+    on_wire = CENTRE + A * e1
+    _, b = fields_at(fld, [on_wire, on_wire + 0.999999e-3 * e1, on_wire + 1.000001e-3 * e1])
+    assert np.all(np.isfinite(b))
+    np.testing.assert_allclose(b[1], b[2], rtol=1e-4)
+
+
+def test_solenoid_on_axis_against_the_current_sheet():
+    """A 200-turn solenoid (200 loops) on its axis: B = μ₀ n I (cos θ₁ − cos θ₂)/2 of a
+    continuous current sheet, to the discreteness of the winding (1e-3 inside)."""
+    length, radius, turns, current = 0.2, 0.03, 200, 5.0
+    sc = make(**{"field.sources": [{"kind": "solenoid", "centre": [0, 0, 0], "axis": [0, 0, 1],
+                                    "radius": radius, "length": length, "turns": turns,
+                                    "current": current}]})
+    z = np.array([0.0, 0.05, 0.09, 0.15])
+    _, b = fields_at(build_field(sc), np.stack([0 * z, 0 * z, z], axis=1))
+    n = turns / length
+    c1 = (length / 2 - z) / np.hypot(length / 2 - z, radius)
+    c2 = (-length / 2 - z) / np.hypot(length / 2 + z, radius)
+    sheet = MU0 * n * current * (c1 - c2) / 2
+    np.testing.assert_allclose(b[:, 2], sheet, rtol=1e-3)
+
+
+def test_superposition():
+    other = {"kind": "loop", "centre": [0.0, 0.05, 0.02], "normal": [1.0, 0.0, 0.0],
+             "radius": 0.03, "current": -200.0, "waveform": "ramp", "rise_time": 1e-3}
+    uniform = {"kind": "uniform", "E": [10.0, 0.0, -5.0], "B": [0.0, 0.01, 0.0]}
+    first = _loop().field.sources[0].model_dump()
+    pts = np.random.default_rng(1).uniform(-0.1, 0.1, (5, 3))
+    parts = [fields_at(build_field(make(**{"field.sources": [s]})), pts, 4e-4)
+             for s in (first, other, uniform)]
+    e, b = fields_at(build_field(make(**{"field.sources": [first, other, uniform]})), pts, 4e-4)
+    np.testing.assert_allclose(e, sum(p[0] for p in parts), rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(b, sum(p[1] for p in parts), rtol=1e-14, atol=1e-18)
+
+
+def test_faraday_law_for_a_ramped_loop():
+    """∮ E·dl around a coaxial circle = −dΦ/dt, Φ the flux of B through the disc (both summed
+    numerically from the field at points): the induced E is consistent with B."""
+    rise = 2e-4
+    fld = build_field(_loop(waveform="ramp", rise_time=rise, start_time=1e-4))
+    t = 1.7e-4  # on the ramp: dI/dt = N I0 / rise
+    for r, h in ((0.02, 0.03), (0.08, -0.01)):
+        e1 = np.cross(NORMAL, [1.0, 0, 0])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(NORMAL, e1)
+        n = 2000
+        th = (np.arange(n) + 0.5) * 2 * np.pi / n
+        ring = CENTRE + h * NORMAL + r * (np.outer(np.cos(th), e1) + np.outer(np.sin(th), e2))
+        tangent = np.outer(-np.sin(th), e1) + np.outer(np.cos(th), e2)
+        e, _ = fields_at(fld, ring, t)
+        circulation = np.sum(e * tangent) * 2 * np.pi * r / n
+        # flux per unit current through the disc (Gauss–Legendre in the radius, axisymmetric)
+        x, w = np.polynomial.legendre.leggauss(60)
+        rho = 0.5 * r * (x + 1)
+        pts = CENTRE + h * NORMAL + np.outer(rho, e1)
+        _, b = fields_at(fld, pts, 1.0)  # after the ramp: the full current N I0
+        flux = np.sum(0.5 * r * w * 2 * np.pi * rho * (b @ NORMAL)) / (TURNS * I0)
+        emf = -(TURNS * I0 / rise) * flux
+        assert circulation == pytest.approx(emf, rel=1e-6)
+    # before the pulse and after the ramp there is no induced E
+    e, _ = fields_at(fld, [CENTRE + 0.03 * NORMAL + 0.02 * e1], 5e-5)
+    assert np.all(e == 0.0)
+
+
+@pytest.mark.parametrize("wave,extra", [
+    ("ramp", {"rise_time": 2e-4, "start_time": 1e-4}),
+    ("damped-sine", {"frequency": 5e3, "decay_time": 3e-4, "start_time": 5e-5}),
+    ("table", {"table": [[0.0, 0.0], [1e-4, 800.0], [3e-4, 200.0]]}),
+])
+def test_waveforms_and_their_rate(wave, extra):
+    """I(t) as specified, and dI/dt equal to its finite difference (E = −dI/dt A)."""
+    kw = {"waveform": wave, **extra}
+    if wave == "table":
+        kw["current"] = None
+    fld = build_field(_loop(**kw))
+    wave_row, table, count = fld.currents[0], fld.tables[0], fld.table_len[0]
+    for t in (2e-5, 7e-5, 1.3e-4, 2.2e-4, 3.5e-4, 5e-4):  # none on a corner of I(t)
+        i, rate = current_at(wave_row, table, count, t)
+        if wave == "ramp":
+            u = min(max((t - 1e-4) / 2e-4, 0.0), 1.0)
+            assert i == pytest.approx(TURNS * I0 * u, abs=1e-9)
+        elif wave == "damped-sine":
+            u = t - 5e-5
+            ref = TURNS * I0 * math.exp(-u / 3e-4) * math.sin(2 * math.pi * 5e3 * u) if u > 0 \
+                else 0.0
+            assert i == pytest.approx(ref, abs=1e-9)
+        else:
+            ref = float(np.interp(t, [0.0, 1e-4, 3e-4], [0.0, 800.0, 200.0])) * TURNS
+            assert i == pytest.approx(ref, abs=1e-9)
+        h = 1e-9
+        ip, _ = current_at(wave_row, table, count, t + h)
+        im, _ = current_at(wave_row, table, count, t - h)
+        assert rate == pytest.approx((ip - im) / (2 * h), rel=1e-5, abs=1e-3 * TURNS * I0 / 1e-4)
+
+
+def test_source_keys_are_checked():
+    with pytest.raises(ScenarioError, match="needs rise_time"):
+        _loop(waveform="ramp")
+    with pytest.raises(ScenarioError, match="not used"):
+        _loop(frequency=10.0)
+    with pytest.raises(ScenarioError, match="current"):
+        make(**{"field.sources": [{"kind": "loop", "centre": [0, 0, 0], "normal": [0, 0, 1],
+                                   "radius": 0.1}]})
+    with pytest.raises(ScenarioError, match="t increasing"):
+        make(**{"field.sources": [{"kind": "loop", "centre": [0, 0, 0], "normal": [0, 0, 1],
+                                   "radius": 0.1, "waveform": "table",
+                                   "table": [[0.0, 1.0], [0.0, 2.0]]}]})
+    with pytest.raises(ScenarioError, match="kind"):
+        make(**{"field.sources": [{"kind": "dipole"}]})
+    with pytest.raises(ScenarioError, match="non-zero"):
+        build_field(_loop(normal=[0.0, 0.0, 0.0]))
+
+
+def test_sources_replace_the_default_uniform_B():
+    """With sources, only what is written acts: the paper's default B = 0.05 e_x is not added
+    (an explicit field.B is)."""
+    assert _loop().field.B == (0.0, 0.0, 0.0)
+    assert make(**{"field.B": [0.0, 0.02, 0.0]}).replace(
+        **{"field.sources": _loop().field.model_dump()["sources"]}).field.B == (0.0, 0.02, 0.0)
+
+
+def test_fabric_keeps_its_energy_in_a_static_loop_field():
+    """A clamped sheet released with a velocity in the static, non-uniform field of a loop:
+    the magnetic force does no work, KE + strain energy kept to O(Δt²)."""
+    def drift(dt):
+        sc = fabric_only(**{
+            "fabric.nodes": [7, 7], "fabric.size": [0.05, 0.05], "fabric.velocity": [0, 0, 200.0],
+            "fabric.charge_per_node": 0.5, "solver.adaptive": False, "solver.dt_max": dt,
+            "solver.tolerance": 1e-12, "solver.max_iterations": 400, "solver.end_time": 10e-6,
+            "field.sources": [{"kind": "loop", "centre": [0.01, 0.0, -0.02],
+                               "normal": [0.0, 0.3, 1.0], "radius": 0.03,
+                               "current": 2e5}]})
+        ds = run(sc).history
+        total = (ds.kinetic_energy_fabric + ds.strain_energy).values
+        return np.abs(total - total[0]).max() / total[0], ds
+
+    e1, ds = drift(4e-8)
+    e2, _ = drift(2e-8)
+    assert float(ds.strain_energy.max()) > 0.05 * float(ds.kinetic_energy_fabric[0])
+    assert e1 < 1e-3
+    assert e1 / e2 > 3.0
+    assert float(np.abs(ds.work_field).max()) == 0.0
+
+
+def test_cli_field_prints_json():
+    loop = ('field.sources=[{kind="loop", centre=[0,0,-0.1], normal=[0,0,1], radius=0.05, '
+            'current=1000.0, turns=3}]')
+    out = subprocess.run([sys.executable, "-m", "emfabric", "field", "paper-no-field", "--set",
+                          loop, "--at", "0", "0", "-0.1"], capture_output=True, text=True,
+                         check=True).stdout
+    got = json.loads(out)
+    assert got["E"] == [0.0, 0.0, 0.0]
+    assert got["B"][2] == pytest.approx(MU0 * 3000 / (2 * 0.05), rel=1e-13)
+    out = subprocess.run([sys.executable, "-m", "emfabric", "field", "paper-field", "--at", "0",
+                          "0", "0", "--at", "1", "2", "3", "--time", "1e-4"],
+                         capture_output=True, text=True, check=True).stdout
+    rows = json.loads(out)
+    assert [r["at"] for r in rows] == [[0.0, 0.0, 0.0], [1.0, 2.0, 3.0]]
+    assert rows[1]["B"] == [0.05, 0.0, 0.0]
+    bad = subprocess.run([sys.executable, "-m", "emfabric", "field", "paper-field", "--at", "0",
+                          "x", "0"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "--at" in bad.stderr
