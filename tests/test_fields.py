@@ -262,3 +262,78 @@ def test_cli_field_prints_json():
     bad = subprocess.run([sys.executable, "-m", "emfabric", "field", "paper-field", "--at", "0",
                           "x", "0"], capture_output=True, text=True)
     assert bad.returncode == 2 and "--at" in bad.stderr
+
+
+def test_cli_field_plot(tmp_path):
+    """--plot draws the field over the sheet and along the flight axis (a PNG) and prints its
+    path; it needs no --at."""
+    out = tmp_path / "field.png"
+    res = subprocess.run([sys.executable, "-m", "emfabric", "field", "paper-field", "--set",
+                          'field.sources=[{kind="loop", centre=[0,0,-0.05], normal=[1,0,0], '
+                          'radius=0.2, current=1.6e4}]', "--plot", str(out)],
+                         capture_output=True, text=True, check=True)
+    assert res.stdout.strip() == str(out)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def _write_map(path, fn, with_e=True, xs=None):
+    import xarray as xr
+
+    xs = np.array([-0.2, -0.05, 0.0, 0.1, 0.2]) if xs is None else xs
+    ys = np.array([-0.2, 0.0, 0.07, 0.2])
+    zs = np.array([-0.1, -0.02, 0.0, 0.05, 0.1])
+    gx, gy, gz = np.meshgrid(xs, ys, zs, indexing="ij")
+    e, b = fn(gx, gy, gz)
+    data = {f"B{c}": (("x", "y", "z"), b[k], {"units": "T"}) for k, c in enumerate("xyz")}
+    if with_e:
+        data.update({f"E{c}": (("x", "y", "z"), e[k], {"units": "V/m"})
+                     for k, c in enumerate("xyz")})
+    xr.Dataset(data, coords={"x": xs, "y": ys, "z": zs}).to_netcdf(path)
+    return path
+
+
+def _linear(x, y, z):
+    e = (100 + 3 * x - 7 * z, -2 * y + 5 * x, 40 * z)
+    b = (0.05 + 0.1 * x - 0.2 * y + 0.05 * z, -0.01 + 0.3 * z, 0.02 * x + 0.4 * y)
+    return e, b
+
+
+def test_map_reproduces_a_linear_field_off_the_grid(tmp_path):
+    """Trilinear interpolation is exact for a linear field: at off-grid points inside the map
+    the code returns the linear field to round-off (with `scale`); outside, no field."""
+    path = str(_write_map(tmp_path / "map.nc", _linear))
+    sc = make(**{"field.sources": [{"kind": "map", "file": path, "scale": 2.0}]})
+    fld = build_field(sc)
+    pts = np.random.default_rng(7).uniform([-0.2, -0.2, -0.1], [0.2, 0.2, 0.1], (50, 3))
+    e, b = fields_at(fld, pts)
+    ref_e, ref_b = _linear(*pts.T)
+    np.testing.assert_allclose(e, 2 * np.array(ref_e).T, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(b, 2 * np.array(ref_b).T, rtol=1e-12, atol=1e-15)
+    e, b = fields_at(fld, [[0.3, 0.0, 0.0], [0.0, 0.0, -0.2]])
+    assert np.all(e == 0.0) and np.all(b == 0.0)
+
+
+def test_map_warns_once_about_nodes_outside(tmp_path, caplog):
+    """The paper's sheet (±0.127 m) on a map spanning x ∈ [−0.1, 0.2]: the nodes with
+    x < −0.1 start outside; the run says how many, once."""
+    import logging
+
+    from emfabric.builder import build_model
+
+    xs = np.array([-0.1, 0.0, 0.2])
+    path = str(_write_map(tmp_path / "map.nc", _linear, with_e=False, xs=xs))
+    sc = make(**{"fabric.nodes": [21, 21], "field.sources": [{"kind": "map", "file": path}]})
+    with caplog.at_level(logging.WARNING, logger="emfabric"):
+        model = build_model(sc)
+    x = model.nodes.x0[0]
+    expected = int((x < -0.1).sum())
+    msgs = [r.getMessage() for r in caplog.records if "outside the field map" in r.getMessage()]
+    assert len(msgs) == 1 and msgs[0].startswith(f"{expected} of {x.size} fabric nodes")
+
+
+def test_map_errors_name_the_file_and_what_is_wrong(tmp_path):
+    with pytest.raises(ScenarioError, match="cannot be read as netCDF"):
+        build_field(make(**{"field.sources": [{"kind": "map", "file": str(tmp_path / "no.nc")}]}))
+    bad = _write_map(tmp_path / "bad.nc", _linear, xs=np.array([0.0, 0.1, 0.1, 0.2, 0.3]))
+    with pytest.raises(ScenarioError, match="increasing"):
+        build_field(make(**{"field.sources": [{"kind": "map", "file": str(bad)}]}))

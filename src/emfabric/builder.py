@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 
 import numpy as np
@@ -28,6 +29,8 @@ from emfabric._kernels.shapes import SHAPES
 from emfabric.geometry import geometry_of, shape_frame
 from emfabric.model import Model
 from emfabric.scenario import Scenario, ScenarioError
+
+log = logging.getLogger(__name__)
 
 
 def grid_coordinates(n: int, size: float) -> np.ndarray:
@@ -210,6 +213,10 @@ def build_model(scenario: Scenario) -> Model:
     )
     check_geometry(model)
     check_stability(model)
+    outside = nodes_outside_map(model.field, node_x0)
+    if outside:
+        log.warning("%d of %d fabric nodes start outside the field map (they see no field "
+                    "from it there)", outside, n)
     return model
 
 
@@ -227,12 +234,19 @@ def build_field(scenario: Scenario) -> Field:
     e = np.asarray(fld.E, dtype=float)
     b = np.asarray(fld.B, dtype=float)
     loops, waves, tables = [], [], []
+    field_map = None
     kinds = {"constant": WAVE_CONSTANT, "ramp": WAVE_RAMP, "damped-sine": WAVE_DAMPED_SINE,
              "table": WAVE_TABLE}
     for i, src in enumerate(fld.sources):
         if src.kind == "uniform":
             e = e + np.asarray(src.E, dtype=float)
             b = b + np.asarray(src.B, dtype=float)
+            continue
+        if src.kind == "map":
+            if field_map is not None:
+                raise ScenarioError(f"field.sources[{i}]: a second field map; allowed: one "
+                                    f"source of kind \"map\" (sum the maps into one file)")
+            field_map = read_field_map(src.file, src.scale, f"field.sources[{i}].file")
             continue
         direction = np.asarray(src.normal if src.kind == "loop" else src.axis, dtype=float)
         size = float(np.linalg.norm(direction))
@@ -272,7 +286,64 @@ def build_field(scenario: Scenario) -> Field:
         currents=np.asarray(waves, dtype=float).reshape(-1, 6),
         tables=padded,
         table_len=np.array([len(tb) for tb in tables], dtype=np.int64),
+        **({} if field_map is None else field_map),
     )
+
+
+def read_field_map(path: str, scale: float, key: str) -> dict:
+    """The map_axes, map_size and map_values of a Field record from a netCDF field map
+    (coordinates x, y, z [m], increasing; Bx, By, Bz [T], optional Ex, Ey, Ez [V/m]), times
+    `scale`. Errors name the key, the file and what is wrong."""
+    import xarray as xr
+
+    try:
+        ds = xr.open_dataset(path)
+    except (OSError, ValueError) as err:
+        raise ScenarioError(f"{key} = {path!r}: cannot be read as netCDF ({err}); allowed: a "
+                            f"netCDF file with coordinates x, y, z and variables Bx, By, Bz") \
+            from None
+    with ds:
+        axes = []
+        for name in "xyz":
+            if name not in ds.variables or ds[name].ndim != 1:
+                raise ScenarioError(f"{key} = {path!r}: no one-dimensional coordinate {name!r}")
+            a = np.asarray(ds[name].values, dtype=float)
+            if a.size < 2 or not np.all(np.isfinite(a)) or np.any(np.diff(a) <= 0):
+                raise ScenarioError(f"{key} = {path!r}: coordinate {name!r} must hold at least "
+                                    f"two finite, increasing values [m]")
+            axes.append(a)
+        values = np.zeros((axes[0].size, axes[1].size, axes[2].size, 6))
+        for c, name in enumerate(("Ex", "Ey", "Ez", "Bx", "By", "Bz")):
+            if name not in ds.variables:
+                if name.startswith("B"):
+                    raise ScenarioError(f"{key} = {path!r}: variable {name!r} is missing "
+                                        f"(B in T on the grid x, y, z)")
+                continue
+            var = ds[name]
+            if set(var.dims) != {"x", "y", "z"}:
+                raise ScenarioError(f"{key} = {path!r}: {name} has dimensions {var.dims}; "
+                                    f"allowed: x, y, z")
+            v = np.asarray(var.transpose("x", "y", "z").values, dtype=float)
+            if not np.all(np.isfinite(v)):
+                raise ScenarioError(f"{key} = {path!r}: {name} holds non-finite values")
+            values[..., c] = scale * v
+    width = max(a.size for a in axes)
+    padded = np.zeros((3, width))
+    for c, a in enumerate(axes):
+        padded[c, :a.size] = a
+    return {"map_axes": padded, "map_size": np.array([a.size for a in axes], dtype=np.int64),
+            "map_values": values}
+
+
+def nodes_outside_map(fld: Field, points: np.ndarray) -> int:
+    """How many of the points (3, N) lie outside the field map's box (0 without a map)."""
+    if fld.map_axes is None:
+        return 0
+    inside = np.ones(points.shape[1], dtype=bool)
+    for c in range(3):
+        grid = fld.map_axes[c, :fld.map_size[c]]
+        inside &= (points[c] >= grid[0]) & (points[c] <= grid[-1])
+    return int((~inside).sum())
 
 
 def check_geometry(model: Model) -> None:

@@ -249,11 +249,14 @@ def field(
     ctx: typer.Context,
     scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name")],
     time: Annotated[float, typer.Option("--time", help="Time [s]")] = 0.0,
+    plot: Annotated[Path | None, typer.Option(
+        "--plot", help="Draw |B| over the sheet's plane and along the flight axis to this "
+                       "file (PNG, PDF, SVG)")] = None,
     set_: Annotated[list[str] | None, typer.Option("--set", help="Override a value")] = None,
 ) -> None:
     """The applied field E [V/m] and B [T] at points given as --at X Y Z (repeat for more), as
     JSON on stdout: {"E": [..], "B": [..]} for one point, a list of {"at", "E", "B"} for
-    several."""
+    several; with --plot, a figure of the field over the sheet and along the flight axis."""
     import math
 
     sc = _load(scenario, set_)
@@ -262,8 +265,8 @@ def field(
     except ValueError as err:
         error(str(err))
         raise typer.Exit(2) from None
-    if not at:
-        error("give at least one point: --at X Y Z")
+    if not at and plot is None:
+        error("give at least one point: --at X Y Z (or --plot FILE)")
         raise typer.Exit(2)
     if not math.isfinite(time):
         error(f"--time {time}: allowed: a finite time [s]")
@@ -276,12 +279,45 @@ def field(
     except ScenarioError as err:
         error(str(err))
         raise typer.Exit(2) from None
+    if plot is not None:
+        emit(str(_field_figure(sc, fld, time, plot)))
+    if not at:
+        return
     e, b = fields_at(fld, at, time)
     rows = [{"at": list(p), "E": e[k].tolist(), "B": b[k].tolist()} for k, p in enumerate(at)]
     if len(rows) == 1:
         emit(json.dumps({"E": rows[0]["E"], "B": rows[0]["B"]}))
     else:
         emit(json.dumps(rows))
+
+
+def _field_figure(sc, fld, time: float, path: Path) -> Path:
+    """Evaluate the field over the sheet's plane (margin 25 %) and along the flight axis (from
+    the projectile's start to as far beyond the sheet), then draw it."""
+    import numpy as np
+
+    from emfabric.builder import build_model
+    from emfabric.field_plot import FieldPicture, draw
+    from emfabric.fields import fields_at
+
+    lx, ly = sc.fabric.size
+    xs = np.linspace(-0.625 * lx, 0.625 * lx, 81)
+    ys = np.linspace(-0.625 * ly, 0.625 * ly, 81)
+    gx, gy = np.meshgrid(xs, ys)
+    plane = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
+    _e, b_plane = fields_at(fld, plane, time)
+    # the projectile's start and flight direction, as the run would have them
+    sc_small = sc.replace(**{"fabric.nodes": [2, 2], "fabric.rescale": False})
+    model = build_model(sc_small)
+    start, d = model.body_x0, model.flight_direction
+    s_sheet = -start[2] / d[2] if d[2] != 0 else float("nan")
+    reach = 2.0 * (abs(s_sheet) if np.isfinite(s_sheet) else max(lx, ly))
+    s = np.linspace(0.0, max(reach, 0.5 * max(lx, ly)), 400)
+    _e, b_axis = fields_at(fld, start + np.outer(s, d), time)
+    pic = FieldPicture(xs, ys, b_plane.reshape(len(ys), len(xs), 3),
+                       (-lx / 2, lx / 2, -ly / 2, ly / 2), start, s, b_axis,
+                       s_sheet if s_sheet >= 0 else float("nan"), time, sc.name)
+    return draw(pic, path)
 
 
 @app.command()

@@ -243,7 +243,19 @@ class UniformSource(_Section):
     """Magnetic field [T]."""
 
 
-Source = Annotated[UniformSource | LoopSource | SolenoidSource, Field(discriminator="kind")]
+class MapSource(_Section):
+    kind: Literal["map"]
+    """A static field map from a netCDF file: coordinates x, y, z [m] (increasing), variables
+    Bx, By, Bz [T] and optionally Ex, Ey, Ez [V/m] on that grid; trilinear between the
+    points, zero outside the map (the run says how many nodes start outside)."""
+    file: Annotated[str, Field(min_length=1)]
+    """Path of the netCDF file (relative paths: from the working directory)."""
+    scale: FiniteFloat = 1.0
+    """Factor on the map's fields [-]."""
+
+
+Source = Annotated[UniformSource | LoopSource | SolenoidSource | MapSource,
+                   Field(discriminator="kind")]
 
 
 class FieldSpec(_Section):
@@ -259,7 +271,7 @@ class FieldSpec(_Section):
     """Gravitational acceleration [m/s²] (off by default)."""
     sources: tuple[Source, ...] = ()
     """Field sources, summed with the uniform E, B above: kind = "uniform" | "loop" |
-    "solenoid" (docs/fields.md)."""
+    "solenoid" | "map" (docs/fields.md)."""
 
     @model_validator(mode="before")
     @classmethod

@@ -30,7 +30,71 @@ def field_at(fld, x, t):
     b = fld.B
     eu = (w * e[0], w * e[1], w * e[2])
     bu = (w * b[0], w * b[1], w * b[2])
+    eu, bu = map_fields(fld.map_axes, fld.map_size, fld.map_values, x, eu, bu)
     return loop_fields(fld.loops, fld.currents, fld.tables, fld.table_len, x, t, eu, bu)
+
+
+def map_fields(axes, size, values, x, e, b):
+    """e, b plus the field map's E and B at x (trilinear; nothing outside the map); axes None:
+    e, b unchanged. Compiled by the type of `axes`, as loop_fields."""
+    if axes is None:
+        return e, b
+    return _map_lookup(axes, size, values, x, e, b)
+
+
+@overload(map_fields, inline="always")
+def _map_fields_typed(axes, size, values, x, e, b):
+    if isinstance(axes, types.NoneType):
+        def no_map(axes, size, values, x, e, b):
+            return e, b
+        return no_map
+
+    def with_map(axes, size, values, x, e, b):
+        return _map_lookup(axes, size, values, x, e, b)
+    return with_map
+
+
+@njit(cache=True)
+def _cell(grid, n, v):
+    """(index i, weight w) with grid[i] ≤ v ≤ grid[i + 1], v = (1 − w) grid[i] + w grid[i + 1];
+    i = −1 outside [grid[0], grid[n − 1]]."""
+    if not (grid[0] <= v <= grid[n - 1]):
+        return -1, 0.0
+    lo, hi = 0, n - 1
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if grid[mid] <= v:
+            lo = mid
+        else:
+            hi = mid
+    return lo, (v - grid[lo]) / (grid[hi] - grid[lo])
+
+
+@njit(cache=True)
+def _map_lookup(axes, size, values, x, e, b):
+    """Trilinear interpolation of the map's six components at x, added to e, b."""
+    i, wx = _cell(axes[0], size[0], x[0])
+    j, wy = _cell(axes[1], size[1], x[1])
+    k, wz = _cell(axes[2], size[2], x[2])
+    if i < 0 or j < 0 or k < 0:
+        return e, b
+    e0, e1, e2, b0, b1, b2 = e[0], e[1], e[2], b[0], b[1], b[2]
+    for di in range(2):
+        fx = wx if di == 1 else 1.0 - wx
+        for dj in range(2):
+            fy = wy if dj == 1 else 1.0 - wy
+            for dk in range(2):
+                f = fx * fy * (wz if dk == 1 else 1.0 - wz)
+                if f == 0.0:
+                    continue
+                p = values[i + di, j + dj, k + dk]
+                e0 += f * p[0]
+                e1 += f * p[1]
+                e2 += f * p[2]
+                b0 += f * p[3]
+                b1 += f * p[4]
+                b2 += f * p[5]
+    return (e0, e1, e2), (b0, b1, b2)
 
 
 def loop_fields(loops, currents, tables, table_len, x, t, e, b):
@@ -97,6 +161,12 @@ def has_electric_field(fld):
     for k in range(fld.currents.shape[0]):
         if int(fld.currents[k, 0]) != WAVE_CONSTANT:
             return True
+    v = fld.map_values
+    for i in range(v.shape[0]):
+        for j in range(v.shape[1]):
+            for k in range(v.shape[2]):
+                if v[i, j, k, 0] != 0.0 or v[i, j, k, 1] != 0.0 or v[i, j, k, 2] != 0.0:
+                    return True
     return False
 
 

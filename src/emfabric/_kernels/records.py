@@ -96,6 +96,13 @@ class Field(NamedTuple):
     """Waveform tables (t [s], I [A]) per loop, padded, (loop_count, points, 2)."""
     table_len: np.ndarray = np.zeros(0, dtype=np.int64)
     """Points used in each loop's table."""
+    map_axes: np.ndarray | None = None
+    """A field map's grid: x, y, z coordinates [m], padded, (3, points); None without a map
+    (then Numba compiles the map lookup away)."""
+    map_size: np.ndarray = np.zeros(3, dtype=np.int64)
+    """Points of the map along x, y, z."""
+    map_values: np.ndarray = np.zeros((1, 1, 1, 6))
+    """The map's E [V/m] and B [T] at the grid points, (nx, ny, nz, 6): Ex Ey Ez Bx By Bz."""
 
 
 class Body(NamedTuple):
