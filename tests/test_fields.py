@@ -48,13 +48,19 @@ def _biot_savart(points, centre, normal, radius, current, n=20000):
 
 
 def test_elliptic_integrals_special_values():
-    k, e = elliptic_ke(0.0)
+    k, e, d = elliptic_ke(0.0)
     assert k == pytest.approx(math.pi / 2, rel=1e-15) and e == pytest.approx(math.pi / 2)
+    assert d == 0.0
     # K(1/2) = Γ(1/4)² / (4 √π), E(1/2) = (K² + π/2)/(2K) (Legendre's relation at k² = 1/2)
-    k, e = elliptic_ke(0.5)
+    k, e, d = elliptic_ke(0.5)
     k_ref = math.gamma(0.25) ** 2 / (4 * math.sqrt(math.pi))
+    e_ref = (k_ref**2 + math.pi / 2) / (2 * k_ref)
     assert k == pytest.approx(k_ref, rel=1e-14)
-    assert e == pytest.approx((k_ref**2 + math.pi / 2) / (2 * k_ref), rel=1e-14)
+    assert e == pytest.approx(e_ref, rel=1e-14)
+    assert d == pytest.approx(0.75 * k_ref - e_ref, rel=1e-13)
+    # small m: (1 − m/2)K − E = (π/2)(3m²/32 + …), no cancellation
+    k, e, d = elliptic_ke(1e-8)
+    assert d == pytest.approx(math.pi / 2 * 3e-16 / 32, rel=1e-7)
 
 
 def test_loop_on_axis_closed_form():
@@ -337,3 +343,19 @@ def test_map_errors_name_the_file_and_what_is_wrong(tmp_path):
     bad = _write_map(tmp_path / "bad.nc", _linear, xs=np.array([0.0, 0.1, 0.1, 0.2, 0.3]))
     with pytest.raises(ScenarioError, match="increasing"):
         build_field(make(**{"field.sources": [{"kind": "map", "file": str(bad)}]}))
+
+
+def test_near_axis_series_meets_the_closed_form():
+    """Across the near-axis cutoff (ρ = 10⁻⁴ a) B_ρ, B_z and A_φ agree to 1e-7: the series and
+    the elliptic-integral forms (A_φ's without cancellation) meet."""
+    from emfabric._kernels.coils import loop_unit_field
+
+    for z in (-0.07, 0.0, 0.03):
+        lo = np.array(loop_unit_field(A, 1e-3, 0.9999999e-4 * A, z))
+        hi = np.array(loop_unit_field(A, 1e-3, 1.0000001e-4 * A, z))
+        np.testing.assert_allclose(hi, lo, rtol=1e-6, atol=1e-7 * np.abs(lo).max())
+
+
+def test_wire_radius_must_be_below_half_the_loop_radius():
+    with pytest.raises(ScenarioError, match="wire_radius"):
+        _loop(wire_radius=0.6 * A)

@@ -332,7 +332,7 @@ def read_field_map(path: str, scale: float, key: str) -> dict:
     for c, a in enumerate(axes):
         padded[c, :a.size] = a
     return {"map_axes": padded, "map_size": np.array([a.size for a in axes], dtype=np.int64),
-            "map_values": values}
+            "map_values": values, "map_has_e": bool(np.any(values[..., :3] != 0.0))}
 
 
 def nodes_outside_map(fld: Field, points: np.ndarray) -> int:

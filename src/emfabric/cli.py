@@ -307,8 +307,15 @@ def _field_figure(sc, fld, time: float, path: Path) -> Path:
     plane = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
     _e, b_plane = fields_at(fld, plane, time)
     # the projectile's start and flight direction, as the run would have them
+    import logging
+
     sc_small = sc.replace(**{"fabric.nodes": [2, 2], "fabric.rescale": False})
-    model = build_model(sc_small)
+    quiet = logging.getLogger("emfabric.builder")
+    was, quiet.disabled = quiet.disabled, True  # its warnings would be about this dummy sheet
+    try:
+        model = build_model(sc_small)
+    finally:
+        quiet.disabled = was
     start, d = model.body_x0, model.flight_direction
     s_sheet = -start[2] / d[2] if d[2] != 0 else float("nan")
     reach = 2.0 * (abs(s_sheet) if np.isfinite(s_sheet) else max(lx, ly))

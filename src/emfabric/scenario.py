@@ -182,8 +182,8 @@ class _Current(_Section):
     table: tuple[tuple[FiniteFloat, FiniteFloat], ...] | None = None
     """"table": [[t, I], ...] [s, A], t increasing; linear between points, held outside."""
     wire_radius: PositiveFloat | None = None
-    """Radius of the wire [m] (default 1 % of the loop radius): within it the field is that of
-    the wire's surface scaled by the distance to its centre line, finite."""
+    """Radius of the wire [m] (default 1 % of the loop radius, below half of it): within it the
+    field is that of the wire's surface scaled by the distance to its centre line, finite."""
 
     @model_validator(mode="after")
     def _waveform_keys(self) -> _Current:
@@ -206,6 +206,11 @@ class _Current(_Section):
                                  f"two [t, I] points with t increasing")
         elif self.current is None:
             raise ValueError("current [A] is needed")
+        radius = getattr(self, "radius", None)
+        if self.wire_radius is not None and radius is not None and \
+                not self.wire_radius < 0.5 * radius:
+            raise ValueError(f"wire_radius = {self.wire_radius}: allowed: below half the radius "
+                             f"({0.5 * radius})")
         return self
 
 

@@ -161,13 +161,7 @@ def has_electric_field(fld):
     for k in range(fld.currents.shape[0]):
         if int(fld.currents[k, 0]) != WAVE_CONSTANT:
             return True
-    v = fld.map_values
-    for i in range(v.shape[0]):
-        for j in range(v.shape[1]):
-            for k in range(v.shape[2]):
-                if v[i, j, k, 0] != 0.0 or v[i, j, k, 1] != 0.0 or v[i, j, k, 2] != 0.0:
-                    return True
-    return False
+    return fld.map_has_e
 
 
 @njit(cache=True, inline="always")

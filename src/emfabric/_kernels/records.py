@@ -103,6 +103,8 @@ class Field(NamedTuple):
     """Points of the map along x, y, z."""
     map_values: np.ndarray = np.zeros((1, 1, 1, 6))
     """The map's E [V/m] and B [T] at the grid points, (nx, ny, nz, 6): Ex Ey Ez Bx By Bz."""
+    map_has_e: bool = False
+    """Whether the map holds a non-zero E anywhere."""
 
 
 class Body(NamedTuple):
