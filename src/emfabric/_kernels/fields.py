@@ -179,3 +179,55 @@ def lorentz_force(q, e, b, v):
     (solved exactly per node, emfabric._kernels.nodes), then magnetic_force for the record."""
     return (q * (e[0] + (v[1] * b[2] - v[2] * b[1])), q * (e[1] + (v[2] * b[0] - v[0] * b[2])),
             q * (e[2] + (v[0] * b[1] - v[1] * b[0])))
+
+
+def _only_uniform(fld):
+    """Whether the Field record type has no loops and no map (decided at compile time)."""
+    names = list(fld.fields)
+    return (isinstance(fld.types[names.index("loops")], types.NoneType)
+            and isinstance(fld.types[names.index("map_axes")], types.NoneType))
+
+
+def fill_row_fields(fld, px, py, pz, count, t, out):
+    """Field at `count` points of a grid row into out (6, ≥ count): Ex Ey Ez Bx By Bz — only
+    for a field with sources; for the uniform field nothing (row_field computes it inline)."""
+    for i in range(count):
+        e, b = field_at(fld, (px[i], py[i], pz[i]), t)
+        for c in range(3):
+            out[c, i] = e[c]
+            out[3 + c, i] = b[c]
+
+
+@overload(fill_row_fields, inline="always")
+def _fill_row_fields_typed(fld, px, py, pz, count, t, out):
+    if _only_uniform(fld):
+        def nothing(fld, px, py, pz, count, t, out):
+            return None
+        return nothing
+
+    def fill(fld, px, py, pz, count, t, out):
+        for i in range(count):
+            e, b = field_at(fld, (px[i], py[i], pz[i]), t)
+            for c in range(3):
+                out[c, i] = e[c]
+                out[3 + c, i] = b[c]
+    return fill
+
+
+def row_field(fld, out, i, x, t):
+    """(E, B) at node i of a row: field_at itself for the uniform field (a compare and a
+    select: cheaper than a store and a load), the value fill_row_fields stored otherwise (the
+    sources are evaluated once per node and iterate, not in every loop that needs them)."""
+    return field_at(fld, x, t)
+
+
+@overload(row_field, inline="always")
+def _row_field_typed(fld, out, i, x, t):
+    if _only_uniform(fld):
+        def inline(fld, out, i, x, t):
+            return field_at(fld, x, t)
+        return inline
+
+    def stored(fld, out, i, x, t):
+        return (out[0, i], out[1, i], out[2, i]), (out[3, i], out[4, i], out[5, i])
+    return stored

@@ -14,7 +14,7 @@ import math
 
 from numba import njit, prange
 
-from emfabric._kernels.fields import field_at, magnetic_force
+from emfabric._kernels.fields import fill_row_fields, magnetic_force, row_field
 from emfabric._kernels.materials import damage, fung_stress, ksv_stress, stretch_sq
 from emfabric._kernels.records import MATERIAL_FUNG
 
@@ -51,9 +51,9 @@ def _row_sums(err_num, err_den, nx, ny, err_rows):
 
 
 # rows of a block's row buffer, shape (ROWBUF_ROWS, nx + 1)
-_TW, _TU, _TD, _D, _U2, _AL, _F, _A, _UU, _AU, _INV, _H = (
-    0, 3, 6, 9, 12, 13, 14, 17, 20, 23, 24, 25)
-ROWBUF_ROWS = 26
+_TW, _TU, _TD, _D, _U2, _AL, _F, _A, _UU, _AU, _INV, _H, _FLD = (
+    0, 3, 6, 9, 12, 13, 14, 17, 20, 23, 24, 25, 26)
+ROWBUF_ROWS = 32
 
 
 @njit(cache=True)
@@ -127,6 +127,7 @@ def _row_block(j0, j1, nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_
     au = buf[_AU]
     inv = buf[_INV]
     hh = buf[_H]
+    fbuf = buf[_FLD:_FLD + 6]
     for j in range(j0, j1):
         nb = j * nx
         sb = j * (nx - 1)
@@ -143,11 +144,13 @@ def _row_block(j0, j1, nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_
         m = mass[nb:e]
         im = inv_mass[nb:e]
         q = charge[nb:e]
-        # the field acts where the node is now (the iterate), at t + Δt. field_at is evaluated
-        # in each loop that needs it rather than stored per node: for the uniform and
-        # half-space fields it is a compare and a select, cheaper than a row of stores and
-        # loads (measured: the stored variant made an evaluation ~7 % slower)
+        # the field acts where the node is now (the iterate), at t + Δt. For the uniform and
+        # half-space fields field_at is evaluated in each loop that needs it (a compare and a
+        # select, cheaper than a row of stores and loads: the stored variant made an evaluation
+        # ~7 % slower); a field with sources is evaluated once per node into the row buffer
+        # (fields.fill_row_fields / row_field, chosen at compile time by the field's type)
         px, py, pz = xx[nb:e], xy[nb:e], xz[nb:e]
+        fill_row_fields(fld, px, py, pz, nx, t1, fbuf)
         for i in range(nx):
             hh[i] = dt * im[i]
         for c in range(3):
@@ -159,7 +162,7 @@ def _row_block(j0, j1, nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_
             # yarn force, one difference per node and direction (mirror-exact assembly),
             # then the electric part of eq. 2.7 and gravity
             for i in range(nx):
-                fe, _fb = field_at(fld, (px[i], py[i], pz[i]), t1)
+                fe, _fb = row_field(fld, fbuf, i, (px[i], py[i], pz[i]), t1)
                 fc[i] = ((tw[i + 1] - tw[i]) + (tuc[i] - tdc[i])) + (m[i] * g + q[i] * fe[c])
             ac = acc[c]
             v0c = v0[c, nb:e]
@@ -170,7 +173,7 @@ def _row_block(j0, j1, nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_
         ux, uy, uz = uu[0], uu[1], uu[2]
         ax, ay, az = acc[0], acc[1], acc[2]
         for i in range(nx):
-            _fe, fb = field_at(fld, (px[i], py[i], pz[i]), t1)
+            _fe, fb = row_field(fld, fbuf, i, (px[i], py[i], pz[i]), t1)
             beta = phi * hh[i] * q[i]
             ux[i] = beta * fb[0]
             uy[i] = beta * fb[1]
@@ -186,7 +189,7 @@ def _row_block(j0, j1, nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_
         fx, fy, fz = f[0], f[1], f[2]
         gx, gy, gz = f1[0, nb:e], f1[1, nb:e], f1[2, nb:e]
         for i in range(nx):
-            _fe, fb = field_at(fld, (px[i], py[i], pz[i]), t1)
+            _fe, fb = row_field(fld, fbuf, i, (px[i], py[i], pz[i]), t1)
             fm = magnetic_force(q[i], (vx[i], vy[i], vz[i]), fb)
             gx[i] = fx[i] + fm[0]
             gy[i] = fy[i] + fm[1]
