@@ -381,3 +381,20 @@ def test_sources_round_trip_through_toml(tmp_path):
     for a, b in zip(fields_at(build_field(sc), pts, 3e-5), fields_at(build_field(back), pts, 3e-5),
                     strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def test_builtin_coil_pulse_reaches_the_paper_field_at_its_peak():
+    """coil-pulse: a Helmholtz pair, B = (4/5)^{3/2} μ₀ N I(t) / R along x at the centre, with
+    I(t) = I₀ e^{−t/τ} sin ωt peaking where tan ωt = ωτ: there B is the paper's 0.05 T to 0.1 %."""
+    from emfabric.scenario import load_scenario
+
+    sc = load_scenario("coil-pulse")
+    src = sc.field.sources[0]
+    w, tau = 2 * math.pi * src.frequency, src.decay_time
+    t_peak = math.atan(w * tau) / w
+    peak = src.current * math.exp(-t_peak / tau) * math.sin(w * t_peak)
+    helmholtz = 0.8**1.5 * MU0 * src.turns * peak / src.radius
+    _, b = fields_at(build_field(sc), [[0.0, 0.0, 0.0]], t_peak)
+    assert b[0, 0] == pytest.approx(helmholtz, rel=1e-9)  # the pair is at Helmholtz spacing
+    assert b[0, 0] == pytest.approx(0.05, rel=1e-3)
+    np.testing.assert_allclose(b[0, 1:], 0.0, atol=1e-15)
