@@ -134,14 +134,15 @@ def machine() -> list[str]:
 
 # --- (a) one evaluation ------------------------------------------------------------------
 
-def deformed_sheet(n: int):
+def deformed_sheet(n: int, overrides: dict | None = None):
     """A paper-field n×n sheet (no projectile) dented and moving: (model, integrator, state)."""
     from emfabric import load_scenario
     from emfabric.builder import build_model
     from emfabric.integrator import Integrator
     from emfabric.state import initial_state, update_forces
 
-    sc = load_scenario(SCENARIO, {"fabric.nodes": [n, n], "projectile.shape": "none"})
+    sc = load_scenario(SCENARIO, {"fabric.nodes": [n, n], "projectile.shape": "none",
+                                  **(overrides or {})})
     model = build_model(sc)
     integ = Integrator(model)
     s = initial_state(model)
@@ -617,6 +618,55 @@ def targets(rows: list[dict], fr: dict | None, st: dict | None) -> None:
          v is not None and v <= TARGETS["start"])
 
 
+FIELD_CASES = {
+    "uniform (the paper's)": {},
+    "one loop": {"field.B": [0.0, 0.0, 0.0], "field.sources": [
+        {"kind": "loop", "centre": [0.0, 0.0, -0.05], "normal": [1.0, 0.0, 0.0],
+         "radius": 0.2, "current": 1.6e4}]},
+    "one loop, pulsed": {"field.B": [0.0, 0.0, 0.0], "field.sources": [
+        {"kind": "loop", "centre": [0.0, 0.0, -0.05], "normal": [1.0, 0.0, 0.0],
+         "radius": 0.2, "current": 1.6e4, "waveform": "damped-sine", "frequency": 1e3,
+         "decay_time": 1e-3}]},
+}
+"""Field sources timed by --fields (a map needs a file: `bench_fields` writes one)."""
+
+
+def bench_fields(repeats: int) -> None:
+    """One fabric_iterate of the dented 100×100 sheet (one thread) with each field source:
+    the cost of evaluating the field, next to the uniform field."""
+    import tempfile
+
+    import numba
+    import xarray as xr
+
+    numba.set_num_threads(1)
+    with tempfile.TemporaryDirectory() as tmp:
+        # a field map over the sheet: 65 × 65 × 33 points of B = 0.05 e_x + a gradient
+        xs = np.linspace(-0.16, 0.16, 65)
+        zs = np.linspace(-0.1, 0.05, 33)
+        gx, gy, gz = np.meshgrid(xs, xs, zs, indexing="ij")
+        path = f"{tmp}/map.nc"
+        xr.Dataset({"Bx": (("x", "y", "z"), 0.05 + 0.1 * gz), "By": (("x", "y", "z"), 0 * gx),
+                    "Bz": (("x", "y", "z"), 0.02 * gy)},
+                   coords={"x": xs, "y": xs, "z": zs}).to_netcdf(path)
+        cases = {**FIELD_CASES, "field map 65×65×33": {
+            "field.B": [0.0, 0.0, 0.0], "field.sources": [{"kind": "map", "file": path}]}}
+        say("(e) field sources: one evaluation + node update of the dented 100 × 100 sheet, "
+            "1 thread")
+        say(f"    {'field':<24}{'best [µs]':>11}{'median [µs]':>13}{'× uniform':>11}")
+        base = None
+        repeat = _compiled_repeat()
+        for name, over in cases.items():
+            model, integ, s = deformed_sheet(100, over)
+            s2 = s.copy()
+            args = iterate_args(integ, s, s2, DT)
+            integ.work.flag[:] = 0
+            repeat(1, *args)
+            best, med = best_and_median(lambda c, a=args: repeat(c, *a), repeats)
+            base = best if base is None else base
+            say(f"    {name:<24}{best * 1e6:>11.1f}{med * 1e6:>13.1f}{best / base:>11.2f}")
+
+
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true",
@@ -634,6 +684,8 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--no-warp", action="store_true", help="leave Warp out of (a)")
     p.add_argument("--schemes", action="store_true",
                    help="only compare the solver schemes on full paper-field runs (minutes)")
+    p.add_argument("--fields", action="store_true",
+                   help="only time the field sources (uniform, loop, pulsed loop, map)")
     p.add_argument("--child", nargs="+", help=argparse.SUPPRESS)
     a = p.parse_args(argv)
 
@@ -651,6 +703,10 @@ def main(argv: list[str] | None = None) -> None:
         say(f"  {line}")
     say()
     base = {} if a.end_time is None else {"solver.end_time": a.end_time}
+    if a.fields:
+        bench_fields(a.repeat)
+        say(f"Other processes used {other_cpu(cpu0):.2f} cores on average while this ran")
+        return
     if a.schemes:
         bench_schemes(base)
         say(f"Other processes used {other_cpu(cpu0):.2f} cores on average while this ran")

@@ -181,53 +181,30 @@ def lorentz_force(q, e, b, v):
             q * (e[2] + (v[0] * b[1] - v[1] * b[0])))
 
 
-def _only_uniform(fld):
-    """Whether the Field record type has no loops and no map (decided at compile time)."""
-    names = list(fld.fields)
-    return (isinstance(fld.types[names.index("loops")], types.NoneType)
-            and isinstance(fld.types[names.index("map_axes")], types.NoneType))
+@njit(cache=True, inline="always")
+def _with_sources(fld):
+    """Whether the field has loops or a map. Both members are None in the record of a uniform
+    field, so this is a constant of the record's type, folded when the caller is compiled."""
+    return not (fld.loops is None and fld.map_axes is None)
 
 
+@njit(cache=True, inline="always")
 def fill_row_fields(fld, px, py, pz, count, t, out):
     """Field at `count` points of a grid row into out (6, ≥ count): Ex Ey Ez Bx By Bz — only
     for a field with sources; for the uniform field nothing (row_field computes it inline)."""
-    for i in range(count):
-        e, b = field_at(fld, (px[i], py[i], pz[i]), t)
-        for c in range(3):
-            out[c, i] = e[c]
-            out[3 + c, i] = b[c]
-
-
-@overload(fill_row_fields, inline="always")
-def _fill_row_fields_typed(fld, px, py, pz, count, t, out):
-    if _only_uniform(fld):
-        def nothing(fld, px, py, pz, count, t, out):
-            return None
-        return nothing
-
-    def fill(fld, px, py, pz, count, t, out):
+    if _with_sources(fld):
         for i in range(count):
             e, b = field_at(fld, (px[i], py[i], pz[i]), t)
             for c in range(3):
                 out[c, i] = e[c]
                 out[3 + c, i] = b[c]
-    return fill
 
 
+@njit(cache=True, inline="always")
 def row_field(fld, out, i, x, t):
     """(E, B) at node i of a row: field_at itself for the uniform field (a compare and a
     select: cheaper than a store and a load), the value fill_row_fields stored otherwise (the
     sources are evaluated once per node and iterate, not in every loop that needs them)."""
-    return field_at(fld, x, t)
-
-
-@overload(row_field, inline="always")
-def _row_field_typed(fld, out, i, x, t):
-    if _only_uniform(fld):
-        def inline(fld, out, i, x, t):
-            return field_at(fld, x, t)
-        return inline
-
-    def stored(fld, out, i, x, t):
+    if _with_sources(fld):
         return (out[0, i], out[1, i], out[2, i]), (out[3, i], out[4, i], out[5, i])
-    return stored
+    return field_at(fld, x, t)
