@@ -398,3 +398,30 @@ def test_builtin_coil_pulse_reaches_the_paper_field_at_its_peak():
     assert b[0, 0] == pytest.approx(helmholtz, rel=1e-9)  # the pair is at Helmholtz spacing
     assert b[0, 0] == pytest.approx(0.05, rel=1e-3)
     np.testing.assert_allclose(b[0, 1:], 0.0, atol=1e-15)
+
+
+def test_even_map_finds_its_cells_by_division(tmp_path):
+    """An evenly spaced map (cells found by division, not bisection) reproduces a linear field
+    exactly too, at random points, at the grid points themselves and at its faces."""
+    import xarray as xr
+
+    xs = np.linspace(-0.2, 0.2, 41)
+    ys = np.linspace(-0.15, 0.15, 7)
+    zs = np.linspace(-0.1, 0.1, 21)
+    gx, gy, gz = np.meshgrid(xs, ys, zs, indexing="ij")
+    e, b = _linear(gx, gy, gz)
+    data = {f"B{c}": (("x", "y", "z"), b[k]) for k, c in enumerate("xyz")}
+    data.update({f"E{c}": (("x", "y", "z"), e[k]) for k, c in enumerate("xyz")})
+    path = tmp_path / "even.nc"
+    xr.Dataset(data, coords={"x": xs, "y": ys, "z": zs}).to_netcdf(path)
+    fld = build_field(make(**{"field.sources": [{"kind": "map", "file": str(path)}]}))
+    assert np.all(fld.map_step > 0)
+    rng = np.random.default_rng(9)
+    pts = np.concatenate([
+        rng.uniform([-0.2, -0.15, -0.1], [0.2, 0.15, 0.1], (200, 3)),
+        np.stack([xs[::5], np.full(9, ys[3]), np.full(9, zs[-1])], axis=1),   # grid points
+        [[0.2, 0.15, 0.1], [-0.2, -0.15, -0.1]]])                              # corners
+    got_e, got_b = fields_at(fld, pts)
+    ref_e, ref_b = _linear(*pts.T)
+    np.testing.assert_allclose(got_e, np.array(ref_e).T, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(got_b, np.array(ref_b).T, rtol=1e-12, atol=1e-15)

@@ -331,7 +331,11 @@ def read_field_map(path: str, scale: float, key: str) -> dict:
     padded = np.zeros((3, width))
     for c, a in enumerate(axes):
         padded[c, :a.size] = a
+    steps = np.array([(a[-1] - a[0]) / (a.size - 1)
+                      if np.allclose(np.diff(a), (a[-1] - a[0]) / (a.size - 1), rtol=1e-9, atol=0)
+                      else 0.0 for a in axes])
     return {"map_axes": padded, "map_size": np.array([a.size for a in axes], dtype=np.int64),
+            "map_step": steps,
             "map_values": values, "map_has_e": bool(np.any(values[..., :3] != 0.0))}
 
 

@@ -30,36 +30,45 @@ def field_at(fld, x, t):
     b = fld.B
     eu = (w * e[0], w * e[1], w * e[2])
     bu = (w * b[0], w * b[1], w * b[2])
-    eu, bu = map_fields(fld.map_axes, fld.map_size, fld.map_values, x, eu, bu)
+    eu, bu = map_fields(fld.map_axes, fld.map_size, fld.map_step, fld.map_values, x, eu, bu)
     return loop_fields(fld.loops, fld.currents, fld.tables, fld.table_len, x, t, eu, bu)
 
 
-def map_fields(axes, size, values, x, e, b):
+def map_fields(axes, size, step, values, x, e, b):
     """e, b plus the field map's E and B at x (trilinear; nothing outside the map); axes None:
     e, b unchanged. Compiled by the type of `axes`, as loop_fields."""
     if axes is None:
         return e, b
-    return _map_lookup(axes, size, values, x, e, b)
+    return _map_lookup(axes, size, step, values, x, e, b)
 
 
 @overload(map_fields, inline="always")
-def _map_fields_typed(axes, size, values, x, e, b):
+def _map_fields_typed(axes, size, step, values, x, e, b):
     if isinstance(axes, types.NoneType):
-        def no_map(axes, size, values, x, e, b):
+        def no_map(axes, size, step, values, x, e, b):
             return e, b
         return no_map
 
-    def with_map(axes, size, values, x, e, b):
-        return _map_lookup(axes, size, values, x, e, b)
+    def with_map(axes, size, step, values, x, e, b):
+        return _map_lookup(axes, size, step, values, x, e, b)
     return with_map
 
 
-@njit(cache=True)
-def _cell(grid, n, v):
+@njit(cache=True, inline="always")
+def _cell(grid, n, step, v):
     """(index i, weight w) with grid[i] ≤ v ≤ grid[i + 1], v = (1 − w) grid[i] + w grid[i + 1];
-    i = −1 outside [grid[0], grid[n − 1]]."""
+    i = −1 outside [grid[0], grid[n − 1]]. An evenly spaced grid (step > 0) finds the cell by
+    division (then checks it against the grid's values), an uneven one by bisection."""
     if not (grid[0] <= v <= grid[n - 1]):
         return -1, 0.0
+    if step > 0.0:
+        lo = min(max(int((v - grid[0]) / step), 0), n - 2)
+        # rounding of the division: step to the neighbour that holds v
+        if v < grid[lo] and lo > 0:
+            lo -= 1
+        elif v > grid[lo + 1] and lo < n - 2:
+            lo += 1
+        return lo, (v - grid[lo]) / (grid[lo + 1] - grid[lo])
     lo, hi = 0, n - 1
     while hi - lo > 1:
         mid = (lo + hi) // 2
@@ -71,11 +80,11 @@ def _cell(grid, n, v):
 
 
 @njit(cache=True)
-def _map_lookup(axes, size, values, x, e, b):
+def _map_lookup(axes, size, step, values, x, e, b):
     """Trilinear interpolation of the map's six components at x, added to e, b."""
-    i, wx = _cell(axes[0], size[0], x[0])
-    j, wy = _cell(axes[1], size[1], x[1])
-    k, wz = _cell(axes[2], size[2], x[2])
+    i, wx = _cell(axes[0], size[0], step[0], x[0])
+    j, wy = _cell(axes[1], size[1], step[1], x[1])
+    k, wz = _cell(axes[2], size[2], step[2], x[2])
     if i < 0 or j < 0 or k < 0:
         return e, b
     e0, e1, e2, b0, b1, b2 = e[0], e[1], e[2], b[0], b[1], b[2]

@@ -101,6 +101,8 @@ class Field(NamedTuple):
     (then Numba compiles the map lookup away)."""
     map_size: np.ndarray = np.zeros(3, dtype=np.int64)
     """Points of the map along x, y, z."""
+    map_step: np.ndarray = np.zeros(3)
+    """The spacing of each evenly spaced map axis [m], 0 for an uneven one."""
     map_values: np.ndarray = np.zeros((1, 1, 1, 6))
     """The map's E [V/m] and B [T] at the grid points, (nx, ny, nz, 6): Ex Ey Ez Bx By Bz."""
     map_has_e: bool = False
