@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from reproduce_paper import print_table  # scripts/ is on the path when run
 
 import emfabric
 from emfabric.builder import build_field
@@ -87,11 +88,7 @@ def main() -> None:
     if args.figures is not None:
         args.figures.mkdir(parents=True, exist_ok=True)
         figure(runs, args.figures / "coil_spin.png")
-    keys = list(rows[0])
-    print("\n| quantity | " + " | ".join(r["scenario"] for r in rows) + " |")
-    print("|---|" + "---|" * len(rows))
-    for key in keys[1:]:
-        print(f"| {key} | " + " | ".join(r[key] for r in rows) + " |")
+    print_table(rows)
 
 
 if __name__ == "__main__":

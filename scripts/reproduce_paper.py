@@ -49,6 +49,15 @@ def _row(name: str, res) -> dict[str, str]:
     }
 
 
+def print_table(rows: list[dict[str, str]]) -> None:
+    """Print rows (one per run, the first key its name) as a Markdown table, a column per run."""
+    keys = list(rows[0])
+    print("\n| quantity | " + " | ".join(r["scenario"] for r in rows) + " |")
+    print("|---|" + "---|" * len(rows))
+    for key in keys[1:]:
+        print(f"| {key} | " + " | ".join(r[key] for r in rows) + " |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("runs"))
@@ -66,11 +75,7 @@ def main() -> None:
         plot_runs([args.out / name])
     overlay = args.out / "compare"
     plot_runs([args.out / "paper-no-field", args.out / "paper-field"], overlay)
-    keys = list(rows[0])
-    print("\n| quantity | " + " | ".join(r["scenario"] for r in rows) + " |")
-    print("|---|" + "---|" * len(rows))
-    for key in keys[1:]:
-        print(f"| {key} | " + " | ".join(r[key] for r in rows) + " |")
+    print_table(rows)
     if args.figures is not None:
         args.figures.mkdir(parents=True, exist_ok=True)
         for name in NAMES:

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from reproduce_paper import print_table  # scripts/ is on the path when run
 
 import emfabric
 from emfabric.plots import plot_runs
@@ -118,11 +119,7 @@ def main() -> None:
             plot_runs([folder])
     yaw_png = args.out / "ogive_yaw_tilt.png"
     yaw_figure(runs, yaw_png)
-    keys = list(rows[0])
-    print("\n| quantity | " + " | ".join(r["scenario"] for r in rows) + " |")
-    print("|---|" + "---|" * len(rows))
-    for key in keys[1:]:
-        print(f"| {key} | " + " | ".join(r[key] for r in rows) + " |")
+    print_table(rows)
     if args.figures is not None:
         args.figures.mkdir(parents=True, exist_ok=True)
         _small_copy(yaw_png, args.figures / yaw_png.name)

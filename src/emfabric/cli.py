@@ -248,7 +248,7 @@ def _points(args: list[str]) -> list[tuple[float, float, float]]:
 def field(
     ctx: typer.Context,
     scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name")],
-    time: Annotated[float, typer.Option("--time", help="Time [s]")] = 0.0,
+    at_time: Annotated[float, typer.Option("--time", help="Time [s]")] = 0.0,
     plot: Annotated[Path | None, typer.Option(
         "--plot", help="Draw |B| over the sheet's plane and along the flight axis to this "
                        "file (PNG, PDF, SVG)")] = None,
@@ -268,8 +268,8 @@ def field(
     if not at and plot is None:
         error("give at least one point: --at X Y Z (or --plot FILE)")
         raise typer.Exit(2)
-    if not math.isfinite(time):
-        error(f"--time {time}: allowed: a finite time [s]")
+    if not math.isfinite(at_time):
+        error(f"--time {at_time}: allowed: a finite time [s]")
         raise typer.Exit(2)
     from emfabric.builder import build_field
     from emfabric.fields import fields_at
@@ -280,10 +280,10 @@ def field(
         error(str(err))
         raise typer.Exit(2) from None
     if plot is not None:
-        emit(str(_field_figure(sc, fld, time, plot)))
+        emit(str(_field_figure(sc, fld, at_time, plot)))
     if not at:
         return
-    e, b = fields_at(fld, at, time)
+    e, b = fields_at(fld, at, at_time)
     rows = [{"at": list(p), "E": e[k].tolist(), "B": b[k].tolist()} for k, p in enumerate(at)]
     if len(rows) == 1:
         emit(json.dumps({"E": rows[0]["E"], "B": rows[0]["B"]}))
@@ -291,7 +291,7 @@ def field(
         emit(json.dumps(rows))
 
 
-def _field_figure(sc, fld, time: float, path: Path) -> Path:
+def _field_figure(sc, fld, at_time: float, path: Path) -> Path:
     """Evaluate the field over the sheet's plane (margin 25 %) and along the flight axis (from
     the projectile's start to as far beyond the sheet), then draw it."""
     import numpy as np
@@ -305,7 +305,7 @@ def _field_figure(sc, fld, time: float, path: Path) -> Path:
     ys = np.linspace(-0.625 * ly, 0.625 * ly, 81)
     gx, gy = np.meshgrid(xs, ys)
     plane = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
-    _e, b_plane = fields_at(fld, plane, time)
+    _e, b_plane = fields_at(fld, plane, at_time)
     # the projectile's start and flight direction, as the run would have them
     import logging
 
@@ -320,10 +320,10 @@ def _field_figure(sc, fld, time: float, path: Path) -> Path:
     s_sheet = -start[2] / d[2] if d[2] != 0 else float("nan")
     reach = 2.0 * (abs(s_sheet) if np.isfinite(s_sheet) else max(lx, ly))
     s = np.linspace(0.0, max(reach, 0.5 * max(lx, ly)), 400)
-    _e, b_axis = fields_at(fld, start + np.outer(s, d), time)
+    _e, b_axis = fields_at(fld, start + np.outer(s, d), at_time)
     pic = FieldPicture(xs, ys, b_plane.reshape(len(ys), len(xs), 3),
                        (-lx / 2, lx / 2, -ly / 2, ly / 2), start, s, b_axis,
-                       s_sheet if s_sheet >= 0 else float("nan"), time, sc.name)
+                       s_sheet if s_sheet >= 0 else float("nan"), at_time, sc.name)
     return draw(pic, path)
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -33,7 +34,8 @@ def _gauss(a: float, b: float) -> tuple[np.ndarray, np.ndarray]:
 
 @dataclass(frozen=True)
 class ShapeGeometry:
-    """Dimensions of one projectile shape [m] and what follows from them."""
+    """Dimensions of one projectile shape [m] and what follows from them (each quadrature is
+    computed once per instance: the run's stop rule reads `bound` every step)."""
 
     kind: str
     radius: float
@@ -42,7 +44,7 @@ class ShapeGeometry:
     flat_half_width: float = 0.0
     bevel: float = 0.0
 
-    @property
+    @cached_property
     def arc_radius(self) -> float:
         """Ogive: radius of the tangent arc, ϱ = (R² + L_n²)/(2R)."""
         if self.kind != "ogive":
@@ -101,13 +103,13 @@ class ShapeGeometry:
         return total
 
     # ---- mass properties ------------------------------------------------------------------
-    @property
+    @cached_property
     def volume(self) -> float:
         if self.kind == "sphere":
             return 4.0 / 3.0 * math.pi * self.radius**3
         return self._integrate(lambda s: self._sections(s)[0])
 
-    @property
+    @cached_property
     def base(self) -> float:
         """Height of the centre of mass above the base face (0 for the sphere)."""
         if self.kind == "sphere":
@@ -130,7 +132,7 @@ class ShapeGeometry:
 
         return np.array([rho * self._integrate(about(k)) for k in range(3)])
 
-    @property
+    @cached_property
     def bound(self) -> float:
         """Largest distance from the centre of mass to the surface."""
         if self.kind == "sphere":
