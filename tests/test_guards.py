@@ -107,6 +107,27 @@ def test_sighup_keeps_a_readable_partial_history(tmp_path):
     assert "Traceback" not in err
 
 
+def test_a_signal_whose_exception_python_dropped_still_stops_the_run(tmp_path):
+    """Python drops an exception raised while it runs a weakref callback or __del__: the
+    handler's flag alone must stop the run at the next step, files kept, marked partial."""
+    from emfabric import runner
+
+    sc = load_scenario("demo-small", {"solver.end_time": 1e-3, "projectile.velocity": [0, 0, 0]})
+    steps = []
+
+    def progress(state, _info):
+        steps.append(state.t)
+        if len(steps) == 3:
+            runner._STOP.set()  # what the handler leaves behind when its raise is dropped
+
+    with pytest.raises(KeyboardInterrupt) as caught:
+        run(sc, tmp_path / "drop", progress=progress)
+    assert len(steps) == 3 and not runner._STOP.is_set()
+    assert caught.value.result.status == "partial"
+    ds = xr.open_dataset(tmp_path / "drop" / "history.nc")
+    assert ds.attrs["status"] == "partial" and ds.sizes["time"] == 4
+
+
 def _cli(*args, cwd=None):
     return subprocess.run([sys.executable, "-m", "emfabric", *args], capture_output=True,
                           text=True, cwd=cwd)

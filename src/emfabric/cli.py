@@ -33,10 +33,6 @@ def _load(scenario: str, overrides: list[str] | None):
         raise typer.Exit(2) from None
 
 
-def _sigterm_as_interrupt(*_args) -> None:
-    raise KeyboardInterrupt
-
-
 @app.command()
 def run(
     scenario: Annotated[str | None, typer.Argument(
@@ -104,9 +100,11 @@ def run(
         def start(progress_fn):
             return run_scenario(sc, out_dir, progress=progress_fn)
     show_messages()
-    signal.signal(signal.SIGTERM, _sigterm_as_interrupt)
-    if hasattr(signal, "SIGHUP"):  # the terminal closed: keep the files, as for SIGTERM
-        signal.signal(signal.SIGHUP, _sigterm_as_interrupt)
+    # Ctrl-C, SIGTERM and a closed terminal (SIGHUP) all stop the run with its files kept
+    from emfabric.runner import interrupt
+    for name in ("SIGINT", "SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), interrupt)
     t_end = sc.solver.end_time
     result = None
     with Progress(

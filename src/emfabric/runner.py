@@ -44,6 +44,18 @@ from emfabric.state import initial_state
 ProgressFn = Callable[[State, StepInfo], None]
 log = logging.getLogger(__name__)
 
+# Set by `interrupt` (the command line's SIGINT/SIGTERM/SIGHUP handler). The handler also raises
+# KeyboardInterrupt at once, but Python drops an exception raised while it runs a weakref
+# callback or a __del__ ("Exception ignored in ..."): the time loop checks this flag every
+# step, so a signal that lands there still stops the run, one step later.
+_STOP = threading.Event()
+
+
+def interrupt(*_args) -> None:
+    """Signal handler: ask the running time loop to stop (files kept, marked partial)."""
+    _STOP.set()
+    raise KeyboardInterrupt
+
 
 @dataclass
 class RunResult:
@@ -183,6 +195,8 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
             # cache): a run killed meanwhile still leaves a readable history
             save("partial", "running (checkpoint)")
         while s_in.t < t_end * (1 - 1e-12):
+            if _STOP.is_set():
+                raise KeyboardInterrupt
             info = integ.step(s_in, s_out, dt_limit=t_end - s_in.t)
             s_in, s_out = s_out, s_in
             row = recorder.new_row()
@@ -215,6 +229,7 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
         status, reason, error = "diverged", str(exc), exc
     except OutputError as exc:
         status, reason, error = "failed", str(exc), exc
+    _STOP.clear()  # handled: a later run in this process starts afresh
     # the last state as a snapshot too (the figures of a partial run end there); a resumed run
     # drops it: the checkpoint counts only the snapshots of the regular interval
     regular = snaps.count
