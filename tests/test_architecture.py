@@ -91,3 +91,28 @@ def test_recorder_computes_no_physics():
     text = (SRC / "io" / "history.py").read_text(encoding="utf-8")
     assert "_kernels" not in text
     assert "emfabric.diagnostics import" in text
+
+
+def test_optional_dependencies_stay_optional():
+    """magpylib (the "magnets" extra) and SciPy (which it brings) are imported only inside the
+    functions that compute a magnet's field: the tests' environment has them, a user's without
+    the extra must not need them (an undeclared SciPy once broke every new install)."""
+    allowed = {("emfabric.source_grid", "magnet_fields"), ("emfabric.source_grid",
+                                                          "import_magpylib")}
+    for path in SRC.rglob("*.py"):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        owner = {}
+        for fn in ast.walk(tree):
+            if isinstance(fn, ast.FunctionDef):
+                for node in ast.walk(fn):
+                    owner.setdefault(node, fn.name)
+        for node in ast.walk(tree):
+            names = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module:
+                names = [node.module]
+            for name in names:
+                if name.split(".")[0] in ("scipy", "magpylib"):
+                    where = (_module(path), owner.get(node))
+                    assert where in allowed, f"{path.name} imports {name} in {where[1]}"

@@ -425,3 +425,166 @@ def test_even_map_finds_its_cells_by_division(tmp_path):
     ref_e, ref_b = _linear(*pts.T)
     np.testing.assert_allclose(got_e, np.array(ref_e).T, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(got_b, np.array(ref_b).T, rtol=1e-12, atol=1e-15)
+
+
+# --- the source grid (emfabric.source_grid) and permanent magnets --------------------------
+
+def _grid_model(cells=64, **over):
+    from emfabric.builder import build_model
+
+    src = {"kind": "loop", "centre": [0.0, 0.02, -0.03], "normal": [1.0, 0.0, 0.2],
+           "radius": 0.06, "current": 5e3, **over}
+    sc = fabric_only(**{"fabric.nodes": [21, 21], "fabric.size": [0.1, 0.1],
+                        "field.sources": [src], "field.grid_cells": cells})
+    return build_model(sc)
+
+
+def test_grid_interpolation_meets_its_tolerance_and_converges():
+    """Random points of the grid's box: the grid's B within the tolerance of the exact loop
+    field (each cell's error estimated on its edges); trilinear interpolation is second order:
+    twice the cells, a quarter of the error (a loose tolerance: no cell falls back)."""
+    rng = np.random.default_rng(5)
+    pts01 = rng.random((3000, 3))
+    errs = []
+    for cells, tol in ((96, None), (32, 0.1), (64, 0.1)):
+        m = _grid_model(cells) if tol is None else _grid_model_tol(cells, tol)
+        fld = m.field
+        exact = build_field(m.scenario)
+        hi = fld.grid_origin + fld.grid_cells * fld.grid_step
+        pts = fld.grid_origin + pts01 * (hi - fld.grid_origin)
+        b_grid = fields_at(fld, pts)[1]
+        b_ex = fields_at(exact, pts)[1]
+        size = np.linalg.norm(b_ex, axis=1)
+        err = np.linalg.norm(b_grid - b_ex, axis=1)
+        if tol is None:
+            tol = m.scenario.field.grid_tolerance
+            assert 0.0 < fld.grid_exact.mean() < 0.5
+            assert np.all(err <= 1.5 * tol * (size + 0.01 * np.median(size)))
+            continue
+        # away from the wire (the cells the loose tolerance still marks exact)
+        g = np.minimum(((pts - fld.grid_origin) / fld.grid_step).astype(int), fld.grid_cells - 1)
+        far = fld.grid_exact[g[:, 2], g[:, 1], g[:, 0]] == 0
+        errs.append(np.median(err[far] / size[far]))  # the max sits at the wire
+    assert 2.5 < errs[0] / errs[1] < 6.0
+
+
+def _grid_model_tol(cells, tol):
+    from emfabric.builder import build_model
+
+    m = _grid_model(cells)
+    return build_model(m.scenario.replace(**{"field.grid_tolerance": tol}))
+
+
+def test_grid_falls_back_to_the_exact_field_outside_and_near_the_wire():
+    m = _grid_model()
+    fld, exact = m.field, build_field(m.scenario)
+    assert 0 < fld.grid_exact.sum() < fld.grid_exact.size  # the wire crosses the box
+    hi = fld.grid_origin + fld.grid_cells * fld.grid_step
+    outside = np.array([hi + 0.01, fld.grid_origin - 0.02])
+    k, j, i = np.argwhere(fld.grid_exact)[0]
+    near_wire = fld.grid_origin + (np.array([i, j, k]) + 0.3) * fld.grid_step
+    pts = np.vstack([outside, near_wire])
+    assert np.array_equal(fields_at(fld, pts)[1], fields_at(exact, pts)[1])
+
+
+def test_node_field_pass_takes_the_predicted_position():
+    """fill_node_fields: the field at x + Δt v, at the step's end time."""
+    from emfabric._kernels.fields import fill_node_fields
+
+    m = _grid_model(waveform="ramp", rise_time=1e-4)
+    x = m.nodes.x0.copy()
+    v = np.random.default_rng(1).normal(0.0, 50.0, x.shape)
+    out = np.empty((6, x.shape[1]))
+    fill_node_fields(m.field, x, v, 2e-7, 3e-5, out)
+    e, b = fields_at(m.field, (x + 2e-7 * v).T, 3e-5)
+    assert np.array_equal(out[:3], e.T) and np.array_equal(out[3:], b.T)
+    assert np.abs(e).max() > 0.0  # the ramp's induced E is there
+
+
+def test_grid_and_exact_runs_agree():
+    """The same impact with the loops from the grid and evaluated exactly: the projectile's
+    velocity and spin agree to the grid's tolerance (not bit for bit)."""
+    over = {"fabric.nodes": [15, 15], "solver.end_time": 1.5e-5, "field.B": [0, 0, 0],
+            "field.sources": [{"kind": "loop", "centre": [0.0, 0.0, -0.05],
+                               "normal": [1.0, 0.0, 0.0], "radius": 0.2, "current": 1.6e4}]}
+    a = run(make(**over)).state.body
+    b = run(make(**over, **{"field.grid": False})).state.body
+    from emfabric._kernels.records import BODY_V, BODY_W
+    assert np.allclose(a[BODY_V], b[BODY_V], rtol=1e-6, atol=1e-6)
+    assert np.allclose(a[BODY_W], b[BODY_W], rtol=1e-3, atol=1e-3 * np.abs(b[BODY_W]).max())
+    assert np.abs(b[BODY_W]).max() > 0.0
+
+
+def _magnet(shape, pol, dim, pos=(0.0, 0.0, -0.04), **kw):
+    return {"kind": "magnet", "shape": shape, "polarization": list(pol),
+            "dimension": list(dim), "position": list(pos), **kw}
+
+
+def test_cylinder_magnet_on_its_axis_closed_form():
+    """An axially polarized cylinder (J, radius R, height h) on its axis outside it:
+    B_z = J/2 [(z + h/2)/√(R² + (z + h/2)²) − (z − h/2)/√(R² + (z − h/2)²)]."""
+    pytest.importorskip("magpylib")
+    j, r, h = 1.2, 0.01, 0.02
+    fld = build_field(make(**{"field.sources": [_magnet("cylinder", (0, 0, j), (2 * r, h))]}))
+    z = np.array([0.0, 0.01, 0.03, -0.065])
+    _e, b = fields_at(fld, np.c_[0 * z, 0 * z, z])
+    u = z + 0.04
+    bz = j / 2 * ((u + h / 2) / np.hypot(r, u + h / 2) - (u - h / 2) / np.hypot(r, u - h / 2))
+    assert np.allclose(b[:, 2], bz, rtol=1e-10, atol=0)
+    assert np.allclose(b[:, :2], 0.0, atol=1e-12)
+
+
+def test_cuboid_magnet_on_its_axis_closed_form_and_orientation():
+    """A cuboid a × b × c polarized along its axis, on the axis at distance u from its centre:
+    B = (J/π)[atan(ab/(2 z₁ √(4z₁² + a² + b²))) − atan(ab/(2 z₂ √(4z₂² + a² + b²)))],
+    z₁ = u − c/2, z₂ = u + c/2; turned by 90° about y, the same field along x."""
+    pytest.importorskip("magpylib")
+    j, a, b_, c = 1.0, 0.02, 0.01, 0.015
+    u = np.array([0.02, 0.035, 0.08])
+
+    def closed(u):
+        z1, z2 = u - c / 2, u + c / 2
+        f = lambda z: np.arctan(a * b_ / (2 * z * np.sqrt(4 * z * z + a * a + b_ * b_)))  # noqa: E731
+        return j / np.pi * (f(z1) - f(z2))
+
+    fld = build_field(make(**{"field.sources": [_magnet("cuboid", (0, 0, j), (a, b_, c),
+                                                         pos=(0, 0, 0))]}))
+    _e, bb = fields_at(fld, np.c_[0 * u, 0 * u, u])
+    assert np.allclose(bb[:, 2], closed(u), rtol=1e-10)
+    turned = build_field(make(**{"field.sources": [_magnet(
+        "cuboid", (0, 0, j), (a, b_, c), pos=(0, 0, 0), orientation=(0, 90, 0))]}))
+    _e, bt = fields_at(turned, np.c_[u, 0 * u, 0 * u])
+    assert np.allclose(bt[:, 0], closed(u), rtol=1e-9)
+
+
+def test_magnet_in_the_run_grid_converges_to_magpylib():
+    """The run takes a magnet's field from the grid: second-order convergence to magpylib's
+    around the sheet (RMS relative error at random points)."""
+    pytest.importorskip("magpylib")
+    from emfabric.builder import build_model
+
+    mag = _magnet("cylinder", (0.0, 0.0, 1.2), (0.02, 0.02))
+    errs = []
+    for cells in (32, 64):
+        sc = fabric_only(**{"fabric.nodes": [11, 11], "fabric.size": [0.1, 0.1],
+                            "field.sources": [mag], "field.grid_cells": cells})
+        m = build_model(sc)
+        pts = np.random.default_rng(2).uniform([-0.05, -0.05, -0.01], [0.05, 0.05, 0.01],
+                                                (2000, 3))
+        b_run = fields_at(m.field, pts)[1]
+        b_ex = fields_at(build_field(sc), pts)[1]
+        err = np.linalg.norm(b_run - b_ex, axis=1) / np.linalg.norm(b_ex, axis=1)
+        errs.append(np.sqrt(np.mean(err**2)))
+    assert errs[1] < 0.01 and 2.5 < errs[0] / errs[1] < 6.0
+
+
+def test_magnet_without_magpylib_is_a_clear_error(monkeypatch):
+    monkeypatch.setitem(sys.modules, "magpylib", None)
+    with pytest.raises(ScenarioError, match=r"field\.sources\[0\]\.kind = \"magnet\".*"
+                                            r"emfabric\[magnets\]"):
+        build_field(make(**{"field.sources": [_magnet("cuboid", (0, 0, 1), (0.01,) * 3)]}))
+
+
+def test_magnet_dimension_is_checked():
+    with pytest.raises(ScenarioError, match=r"dimension = \[0\.01, 0\.01\].*\[a, b, c\]"):
+        make(**{"field.sources": [_magnet("cuboid", (0, 0, 1), (0.01, 0.01))]})

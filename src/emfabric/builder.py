@@ -29,6 +29,7 @@ from emfabric._kernels.shapes import SHAPES
 from emfabric.geometry import geometry_of, shape_frame
 from emfabric.model import Model
 from emfabric.scenario import Scenario, ScenarioError
+from emfabric.source_grid import build_source_grid
 
 log = logging.getLogger(__name__)
 
@@ -178,7 +179,8 @@ def build_model(scenario: Scenario) -> Model:
             damage_rate=float(fab.damage.rate),
             broken_below=float(fab.damage.broken_below),
         ),
-        field=build_field(scenario),
+        field=build_source_grid(build_field(scenario), node_x0, scenario.field.grid_cells,
+                                scenario.field.grid_tolerance, scenario.field.grid),
         body=Body(
             active=has_body,
             shape=SHAPES.get(pr.shape, SHAPE_SPHERE),  # "none": no body, shape unused
@@ -235,12 +237,23 @@ def build_field(scenario: Scenario) -> Field:
     b = np.asarray(fld.B, dtype=float)
     loops, waves, tables = [], [], []
     field_map = None
+    magnets: list[list[float]] = []
     kinds = {"constant": WAVE_CONSTANT, "ramp": WAVE_RAMP, "damped-sine": WAVE_DAMPED_SINE,
              "table": WAVE_TABLE}
     for i, src in enumerate(fld.sources):
         if src.kind == "uniform":
             e = e + np.asarray(src.E, dtype=float)
             b = b + np.asarray(src.B, dtype=float)
+            continue
+        if src.kind == "magnet":
+            from emfabric.source_grid import import_magpylib
+            try:
+                import_magpylib()
+            except ImportError as err:
+                raise ScenarioError(f"field.sources[{i}].kind = \"magnet\": {err}") from None
+            magnets.append([0.0 if src.shape == "cuboid" else 1.0, *src.polarization,
+                            *(list(src.dimension) + [0.0])[:3], *src.position,
+                            *np.radians(np.asarray(src.orientation, dtype=float))])
             continue
         if src.kind == "map":
             if field_map is not None:
@@ -286,6 +299,7 @@ def build_field(scenario: Scenario) -> Field:
         currents=np.asarray(waves, dtype=float).reshape(-1, 6),
         tables=padded,
         table_len=np.array([len(tb) for tb in tables], dtype=np.int64),
+        magnets=np.asarray(magnets, dtype=float).reshape(-1, 13),
         **({} if field_map is None else field_map),
     )
 

@@ -122,6 +122,9 @@ class State:
     """Node velocities [m/s], shape (3, node_count)."""
     node_f: np.ndarray
     """Non-impulsive force on each node at time t (ψ(t) of the φ-scheme) [N], (3, node_count)."""
+    node_e: np.ndarray
+    """The electric field [V/m] in each node's ψ(t), (3, node_count): the energy bookkeeping's
+    field work uses the field the φ-update used (emfabric._kernels.energy)."""
     seg_alpha: np.ndarray
     """Committed yarn damage α (1 intact, 0 broken), shape (seg_count,)."""
     body: np.ndarray
@@ -153,7 +156,8 @@ class State:
     @property
     def arrays(self) -> StateArrays:
         """The arrays a step kernel reads or writes, as a named record."""
-        return StateArrays(self.node_x, self.node_v, self.node_f, self.seg_alpha, self.body)
+        return StateArrays(self.node_x, self.node_v, self.node_f, self.seg_alpha, self.body,
+                           self.node_e)
 
     @property
     def body_x(self) -> np.ndarray:

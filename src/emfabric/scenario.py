@@ -259,7 +259,35 @@ class MapSource(_Section):
     """Factor on the map's fields [-]."""
 
 
-Source = Annotated[UniformSource | LoopSource | SolenoidSource | MapSource,
+class MagnetSource(_Section):
+    kind: Literal["magnet"]
+    """A permanent magnet, uniformly polarized (magpylib computes its field: needs the
+    "magnets" extra, pip install 'emfabric[magnets]')."""
+    shape: Literal["cuboid", "cylinder"]
+    """"cuboid" (dimension = [a, b, c], side lengths along its x, y, z) or "cylinder"
+    (dimension = [d, h], diameter and height, axis along its z)."""
+    polarization: FiniteVec3
+    """Magnetic polarization J = μ₀M [T] in the magnet's own frame (a remanence of ~1.3 T for
+    NdFeB)."""
+    dimension: tuple[PositiveFloat, ...]
+    """[a, b, c] (cuboid) or [d, h] (cylinder) [m]."""
+    position: FiniteVec3 = (0.0, 0.0, 0.0)
+    """Centre of the magnet [m]."""
+    orientation: FiniteVec3 = (0.0, 0.0, 0.0)
+    """Rotation of the magnet's frame as a rotation vector [deg]: axis × angle (zero: the
+    magnet's axes are the world's)."""
+
+    @model_validator(mode="after")
+    def _dimension_count(self) -> MagnetSource:
+        count = 3 if self.shape == "cuboid" else 2
+        if len(self.dimension) != count:
+            what = "[a, b, c]" if count == 3 else "[d, h]"
+            raise ValueError(f'dimension = {list(self.dimension)}: allowed for shape = '
+                             f'"{self.shape}": {what}, {count} positive lengths [m]')
+        return self
+
+
+Source = Annotated[UniformSource | LoopSource | SolenoidSource | MapSource | MagnetSource,
                    Field(discriminator="kind")]
 
 
@@ -276,7 +304,16 @@ class FieldSpec(_Section):
     """Gravitational acceleration [m/s²] (off by default)."""
     sources: tuple[Source, ...] = ()
     """Field sources, summed with the uniform E, B above: kind = "uniform" | "loop" |
-    "solenoid" | "map" (docs/fields.md)."""
+    "solenoid" | "magnet" | "map" (docs/fields.md)."""
+    grid: bool = True
+    """Take the loops' and solenoids' fields from a grid precomputed over the fabric's reach
+    (exact near the wires and outside the grid; docs/fields.md), or evaluate them exactly at
+    every node (false: several times slower). Magnets always use the grid."""
+    grid_cells: Annotated[int, Field(ge=8, le=512)] = 96
+    """Cells of the source grid across the fabric's larger side [-]."""
+    grid_tolerance: Annotated[float, Field(gt=0.0, le=0.1)] = 1e-3
+    """Largest relative error of the grid's interpolation of the loops (estimated on each
+    cell's edges); cells above it evaluate the loops exactly [-]."""
 
     @model_validator(mode="before")
     @classmethod

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from emfabric._kernels.body import field_wrench
+from emfabric._kernels.fields import electric_at_nodes, fill_node_fields
 from emfabric._kernels.nodes import ROWBUF_ROWS, fused_iterate
 from emfabric._kernels.records import (
     BODY_F,
@@ -33,6 +34,7 @@ def initial_state(model: Model) -> State:
         node_x=m.nodes.x0.copy(),
         node_v=m.node_v0.copy(),
         node_f=np.zeros((3, n)),
+        node_e=np.zeros((3, n)),
         seg_alpha=np.ones(s),
         body=np.zeros((BODY_ROWS, 3)),
     )
@@ -54,11 +56,14 @@ def update_forces(model: Model, state: State) -> None:
     n = m.node_count
     scratch = state.copy()
     work = make_work(m.nx, m.ny, m.seg_count)
-    fused_iterate(m.nodes, m.yarns, m.material, m.field, state.node_x, state.node_x,
+    fill_node_fields(m.field, state.node_x, state.node_v, 0.0, state.t, work.node_field)
+    fused_iterate(m.nodes, m.yarns, m.material, m.field, work.node_field, state.node_x,
+                  state.node_x,
                   state.node_v, np.zeros_like(state.node_f), state.seg_alpha, scratch.seg_alpha,
                   scratch.node_x, scratch.node_v, state.node_f, np.ones(n, dtype=np.uint8),
                   work.err_rows, work.err_num, work.err_den, state.t, 1.0, 0.0,
                   np.empty((ROWBUF_ROWS, m.nx + 1)))
+    electric_at_nodes(m.field, work.node_field, state.node_x, state.t, state.node_e)
     if m.has_body:
         b = state.body
         field_wrench(m.body, m.field, state.t, b, b[BODY_F], b[BODY_M])

@@ -13,7 +13,12 @@ update and is booked as projection dissipation. Damage releases α-drop × store
 
 from numba import njit
 
-from emfabric._kernels.fields import field_at, has_electric_field, magnetic_force
+from emfabric._kernels.fields import (
+    field_at,
+    has_electric_field,
+    magnetic_force,
+    node_field,
+)
 from emfabric._kernels.materials import strain_energy_density, stretch_sq
 from emfabric._kernels.records import BODY_R0, BODY_V, BODY_W, BODY_X
 from emfabric._kernels.vec3 import cross, dot, mat_vec, vec
@@ -35,12 +40,14 @@ def step_energy(phys, sin, sout, nc, work, t0, phi, dt, out):
     # no E and no gravity (the paper's case): nothing works on the nodes, skip the node pass
     electric = has_electric_field(fld)
     active = electric or grav[0] != 0.0 or grav[1] != 0.0 or grav[2] != 0.0
+    e0s, e1s = sin.e, sout.e
     for n in range(x0.shape[1] if active else 0):
         if inv_mass[n] == 0.0:
             continue
-        # electric work q Ē·Δx with Ē the φ-weighted field at the two ends (magnetic: none)
-        e0, _b0 = field_at(fld, (x0[0, n], x0[1, n], x0[2, n]), t0)
-        e1, _b1 = field_at(fld, (x1[0, n], x1[1, n], x1[2, n]), t1)
+        # electric work q Ē·Δx with Ē the φ-weighted field the node update used at the two
+        # ends (the State's e; magnetic: none)
+        e0 = (e0s[0, n], e0s[1, n], e0s[2, n])
+        e1 = (e1s[0, n], e1s[1, n], e1s[2, n])
         q = charge[n]
         m = mass[n]
         for c in range(3):
@@ -97,7 +104,8 @@ def step_energy(phys, sin, sout, nc, work, t0, phi, dt, out):
     cand = work.cand
     for idx in range(work.counts[0]):
         n = cand[idx]
-        _e1, b1 = field_at(fld, (x1[0, n], x1[1, n], x1[2, n]), t1)
+        # the B the node update used (the attempt's stored field for sources)
+        _e1, b1 = node_field(fld, work.node_field, n, (x1[0, n], x1[1, n], x1[2, n]), t1)
         fm = magnetic_force(charge[n], (work.v_pre[0, n], work.v_pre[1, n], work.v_pre[2, n]),
                             b1)
         for c in range(3):

@@ -9,7 +9,8 @@ calls field_at; a new field source is a new branch here and a new scenario entry
 
 import math
 
-from numba import njit
+import numpy as np
+from numba import njit, prange
 from numba.core import types
 from numba.extending import overload
 
@@ -31,7 +32,191 @@ def field_at(fld, x, t):
     eu = (w * e[0], w * e[1], w * e[2])
     bu = (w * b[0], w * b[1], w * b[2])
     eu, bu = map_fields(fld.map_axes, fld.map_size, fld.map_step, fld.map_values, x, eu, bu)
-    return loop_fields(fld.loops, fld.currents, fld.tables, fld.table_len, x, t, eu, bu)
+    return source_fields(fld.grid_values, fld, x, t, eu, bu)
+
+
+@njit(cache=True, inline="always")
+def field_at_waves(fld, x, t, cur, rate):
+    """field_at with the source grid's group waveforms at t given (group_waves(fld, t)): for
+    the kernels that evaluate the field at many points of one time."""
+    w = 1.0 if (fld.region != REGION_HALF_SPACE or x[2] < fld.z0) else 0.0
+    e = fld.E
+    b = fld.B
+    eu = (w * e[0], w * e[1], w * e[2])
+    bu = (w * b[0], w * b[1], w * b[2])
+    eu, bu = map_fields(fld.map_axes, fld.map_size, fld.map_step, fld.map_values, x, eu, bu)
+    return grid_fields(fld.grid_values, fld, x, t, cur, rate, eu, bu)
+
+
+@njit(cache=True)
+def group_waves(fld, t):
+    """Each grid group's waveform and its rate at t: (w, dw/dt), arrays (groups,)."""
+    count = fld.grid_wave.shape[0]
+    cur = np.empty(count)
+    rate = np.empty(count)
+    for g in range(count):
+        k = fld.grid_wave[g]
+        if k < 0:
+            cur[g], rate[g] = 1.0, 0.0
+        else:
+            cur[g], rate[g] = current_at(fld.currents[k], fld.tables[k], fld.table_len[k], t)
+    return cur, rate
+
+
+def source_fields(grid, fld, x, t, e, b):
+    """e, b plus the loops' and magnets' fields at x, t: from the source grid if there is one
+    (grid_fields), else the loops exactly. Compiled by the type of `grid`, as loop_fields."""
+    if grid is None:
+        return loop_fields(fld.loops, fld.currents, fld.tables, fld.table_len, x, t, e, b)
+    cur, rate = group_waves(fld, t)
+    return _grid_sum(fld, x, t, cur, rate, e, b)
+
+
+@overload(source_fields, inline="always")
+def _source_fields_typed(grid, fld, x, t, e, b):
+    if isinstance(grid, types.NoneType):
+        def no_grid(grid, fld, x, t, e, b):
+            return loop_fields(fld.loops, fld.currents, fld.tables, fld.table_len, x, t, e, b)
+        return no_grid
+
+    def with_grid(grid, fld, x, t, e, b):
+        cur, rate = group_waves(fld, t)
+        return _grid_sum(fld, x, t, cur, rate, e, b)
+    return with_grid
+
+
+def grid_fields(grid, fld, x, t, cur, rate, e, b):
+    """source_fields with the group waveforms given."""
+    if grid is None:
+        return loop_fields(fld.loops, fld.currents, fld.tables, fld.table_len, x, t, e, b)
+    return _grid_sum(fld, x, t, cur, rate, e, b)
+
+
+@overload(grid_fields, inline="always")
+def _grid_fields_typed(grid, fld, x, t, cur, rate, e, b):
+    if isinstance(grid, types.NoneType):
+        def no_grid(grid, fld, x, t, cur, rate, e, b):
+            return loop_fields(fld.loops, fld.currents, fld.tables, fld.table_len, x, t, e, b)
+        return no_grid
+
+    def with_grid(grid, fld, x, t, cur, rate, e, b):
+        return _grid_sum(fld, x, t, cur, rate, e, b)
+    return with_grid
+
+
+@njit(cache=True, inline="always")
+def _grid_sum(fld, x, t, cur, rate, e, b):
+    """e, b plus the grid's groups at x, and the loops exactly where the grid does not hold
+    them (_grid_lookup)."""
+    e, b, loops_in = _grid_lookup(fld.grid_values, fld.grid_origin, fld.grid_step,
+                                  fld.grid_cells, fld.grid_exact, fld.grid_wave,
+                                  fld.grid_loops, cur, rate, x, e, b)
+    if not loops_in:
+        return loop_fields(fld.loops, fld.currents, fld.tables, fld.table_len, x, t, e, b)
+    return e, b
+
+
+@njit(cache=True, inline="always")
+def _grid_lookup(vals, origin, step, cells, exact, wave, grid_loops, cur, rate, x, e, b):
+    """(e, b plus the grid's groups at x, whether the loops are among them). Trilinear: each
+    group's b times its waveform w and the induced −(dw/dt) a. The loops are not taken from
+    the grid outside it, in a cell marked exact, or at all when grid_loops is False (the caller
+    adds them exactly then); the magnets exist only in the grid: nothing outside it.
+
+    Takes the record's arrays, not the record: a per-point access of a record's array member
+    costs a reference count (the node pass hoists them out of its loop)."""
+    gx = (x[0] - origin[0]) / step[0]
+    gy = (x[1] - origin[1]) / step[1]
+    gz = (x[2] - origin[2]) / step[2]
+    ex, ey, ez = e
+    bx, by, bz = b
+    if not (0.0 <= gx <= cells[0] and 0.0 <= gy <= cells[1] and 0.0 <= gz <= cells[2]):
+        return (ex, ey, ez), (bx, by, bz), False
+    i = min(int(gx), cells[0] - 1)
+    j = min(int(gy), cells[1] - 1)
+    k = min(int(gz), cells[2] - 1)
+    wx, wy, wz = gx - i, gy - j, gz - k
+    loops_in = grid_loops and exact[k, j, i] == 0
+    ux, uy, uz = 1.0 - wx, 1.0 - wy, 1.0 - wz
+    for g in range(vals.shape[0]):
+        if not (loops_in or wave[g] < 0):
+            continue
+        w, dw = cur[g], rate[g]
+        if w == 0.0 and dw == 0.0:
+            continue
+        r0 = r1 = r2 = r3 = r4 = r5 = 0.0
+        for di in range(2):
+            fx = wx if di == 1 else ux
+            for dj in range(2):
+                fxy = fx * (wy if dj == 1 else uy)
+                f0 = fxy * uz
+                f1 = fxy * wz
+                a, bb = i + di, j + dj
+                r0 += f0 * vals[g, k, bb, a, 0] + f1 * vals[g, k + 1, bb, a, 0]
+                r1 += f0 * vals[g, k, bb, a, 1] + f1 * vals[g, k + 1, bb, a, 1]
+                r2 += f0 * vals[g, k, bb, a, 2] + f1 * vals[g, k + 1, bb, a, 2]
+                if dw != 0.0:
+                    r3 += f0 * vals[g, k, bb, a, 3] + f1 * vals[g, k + 1, bb, a, 3]
+                    r4 += f0 * vals[g, k, bb, a, 4] + f1 * vals[g, k + 1, bb, a, 4]
+                    r5 += f0 * vals[g, k, bb, a, 5] + f1 * vals[g, k + 1, bb, a, 5]
+        bx += w * r0
+        by += w * r1
+        bz += w * r2
+        if dw != 0.0:
+            ex -= dw * r3
+            ey -= dw * r4
+            ez -= dw * r5
+    return (ex, ey, ez), (bx, by, bz), loops_in
+
+
+def fill_fields(grid, fld, x, v, dt, t, out):
+    """out (6, N) = E, B at the points x + Δt v (3, N) and time t: field_at at each point,
+    with the record's arrays taken out once (compiled by the type of `grid`, as
+    loop_fields)."""
+    cur, rate = group_waves(fld, t)
+    for n in range(x.shape[1]):
+        e, b = field_at_waves(fld, (x[0, n] + dt * v[0, n], x[1, n] + dt * v[1, n],
+                                    x[2, n] + dt * v[2, n]), t, cur, rate)
+        for c in range(3):
+            out[c, n] = e[c]
+            out[3 + c, n] = b[c]
+
+
+@overload(fill_fields)
+def _fill_fields_typed(grid, fld, x, v, dt, t, out):
+    if isinstance(grid, types.NoneType):
+        def plain(grid, fld, x, v, dt, t, out):
+            cur, rate = group_waves(fld, t)
+            for n in range(x.shape[1]):
+                e, b = field_at_waves(fld, (x[0, n] + dt * v[0, n], x[1, n] + dt * v[1, n],
+                                            x[2, n] + dt * v[2, n]), t, cur, rate)
+                for c in range(3):
+                    out[c, n] = e[c]
+                    out[3 + c, n] = b[c]
+        return plain
+
+    def hoisted(grid, fld, x, v, dt, t, out):
+        cur, rate = group_waves(fld, t)
+        ue, ub, region, z0 = fld.E, fld.B, fld.region, fld.z0
+        axes, size, mstep, mvals = fld.map_axes, fld.map_size, fld.map_step, fld.map_values
+        origin, step, cells, exact = fld.grid_origin, fld.grid_step, fld.grid_cells, \
+            fld.grid_exact
+        wave, grid_loops = fld.grid_wave, fld.grid_loops
+        for n in range(x.shape[1]):
+            p = (x[0, n] + dt * v[0, n], x[1, n] + dt * v[1, n], x[2, n] + dt * v[2, n])
+            w = 1.0 if (region != REGION_HALF_SPACE or p[2] < z0) else 0.0
+            e = (w * ue[0], w * ue[1], w * ue[2])
+            b = (w * ub[0], w * ub[1], w * ub[2])
+            e, b = map_fields(axes, size, mstep, mvals, p, e, b)
+            e, b, loops_in = _grid_lookup(grid, origin, step, cells, exact, wave, grid_loops,
+                                          cur, rate, p, e, b)
+            if not loops_in:
+                e, b = loop_fields(fld.loops, fld.currents, fld.tables, fld.table_len, p, t,
+                                   e, b)
+            for c in range(3):
+                out[c, n] = e[c]
+                out[3 + c, n] = b[c]
+    return hoisted
 
 
 def map_fields(axes, size, step, values, x, e, b):
@@ -191,29 +376,54 @@ def lorentz_force(q, e, b, v):
 
 
 @njit(cache=True, inline="always")
-def _with_sources(fld):
-    """Whether the field has loops or a map. Both members are None in the record of a uniform
-    field, so this is a constant of the record's type, folded when the caller is compiled."""
-    return not (fld.loops is None and fld.map_axes is None)
+def with_sources(fld):
+    """Whether the field has loops, a map or a source grid. These members are None in the
+    record of a uniform field, so this is a constant of the record's type, folded when the
+    caller is compiled."""
+    return not (fld.loops is None and fld.map_axes is None and fld.grid_values is None)
+
+
+@njit(cache=True)
+def fill_node_fields(fld, x, v, dt, t, out):
+    """The field of a field with sources at every node, once per attempted step: out (6, N)
+    = Ex Ey Ez Bx By Bz at the predicted position x + Δt v and time t (the step's end).
+
+    The node update takes the field from here in every fixed-point iterate instead of at the
+    iterate itself: the iterates differ from the prediction by O(Δt² a), so the field's error
+    is O(Δt² |a| |∇B|), a local error of the φ-scheme's own order (second)."""
+    fill_fields(fld.grid_values, fld, x, v, dt, t, out)
+
+
+@njit(cache=True)
+def electric_at_nodes(fld, nf, x, t, out):
+    """out (3, N) = the electric field the node update used at the nodes x at t: the stored
+    field of the attempt for sources (nf), field_at for the uniform field."""
+    for n in range(x.shape[1]):
+        e, _b = node_field(fld, nf, n, (x[0, n], x[1, n], x[2, n]), t)
+        out[0, n] = e[0]
+        out[1, n] = e[1]
+        out[2, n] = e[2]
+
+
+FIELD_CHUNK = 512
+"""Nodes per task of fill_node_fields_threads."""
+
+
+@njit(parallel=True)  # never cached on its own, as nodes.fused_iterate_threads
+def fill_node_fields_threads(fld, x, v, dt, t, out):
+    """fill_node_fields over chunks of nodes in parallel threads (each node's field is the
+    same arithmetic whatever the thread count)."""
+    n = x.shape[1]
+    for c in prange((n + FIELD_CHUNK - 1) // FIELD_CHUNK):
+        a = c * FIELD_CHUNK
+        b = min(n, a + FIELD_CHUNK)
+        fill_fields(fld.grid_values, fld, x[:, a:b], v[:, a:b], dt, t, out[:, a:b])
 
 
 @njit(cache=True, inline="always")
-def fill_row_fields(fld, px, py, pz, count, t, out):
-    """Field at `count` points of a grid row into out (6, ≥ count): Ex Ey Ez Bx By Bz — only
-    for a field with sources; for the uniform field nothing (row_field computes it inline)."""
-    if _with_sources(fld):
-        for i in range(count):
-            e, b = field_at(fld, (px[i], py[i], pz[i]), t)
-            for c in range(3):
-                out[c, i] = e[c]
-                out[3 + c, i] = b[c]
-
-
-@njit(cache=True, inline="always")
-def row_field(fld, out, i, x, t):
-    """(E, B) at node i of a row: field_at itself for the uniform field (a compare and a
-    select: cheaper than a store and a load), the value fill_row_fields stored otherwise (the
-    sources are evaluated once per node and iterate, not in every loop that needs them)."""
-    if _with_sources(fld):
-        return (out[0, i], out[1, i], out[2, i]), (out[3, i], out[4, i], out[5, i])
+def node_field(fld, nf, n, x, t):
+    """(E, B) at node n, at its iterate x: field_at itself for the uniform field (a compare and
+    a select: cheaper than a store and a load), what fill_node_fields stored otherwise."""
+    if with_sources(fld):
+        return (nf[0, n], nf[1, n], nf[2, n]), (nf[3, n], nf[4, n], nf[5, n])
     return field_at(fld, x, t)

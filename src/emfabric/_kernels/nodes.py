@@ -14,7 +14,7 @@ import math
 
 from numba import njit, prange
 
-from emfabric._kernels.fields import fill_row_fields, magnetic_force, row_field
+from emfabric._kernels.fields import magnetic_force, node_field
 from emfabric._kernels.materials import damage, fung_stress, ksv_stress, stretch_sq
 from emfabric._kernels.records import MATERIAL_FUNG
 
@@ -51,9 +51,9 @@ def _row_sums(err_num, err_den, nx, ny, err_rows):
 
 
 # rows of a block's row buffer, shape (ROWBUF_ROWS, nx + 1)
-_TW, _TU, _TD, _D, _U2, _AL, _F, _A, _UU, _AU, _INV, _H, _FLD = (
-    0, 3, 6, 9, 12, 13, 14, 17, 20, 23, 24, 25, 26)
-ROWBUF_ROWS = 32
+_TW, _TU, _TD, _D, _U2, _AL, _F, _A, _UU, _AU, _INV, _H = (
+    0, 3, 6, 9, 12, 13, 14, 17, 20, 23, 24, 25)
+ROWBUF_ROWS = 26
 
 
 @njit(cache=True)
@@ -93,7 +93,7 @@ def _tensions(xa_x, xa_y, xa_z, xb_x, xb_y, xb_z, count, il2, alpha_c, alpha_t, 
 
 
 @njit(cache=True)
-def _row_block(j0, j1, nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_t, t1, phi, dt,
+def _row_block(j0, j1, nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, t1, phi, dt,
                skip_err, x1, v1, f1, err_num, err_den, buf):
     """Rows j0 ≤ j < j1 of the fused iterate. The tensions of row j (warp) and between rows j and
     j + 1 (fill) live in the block's row buffer and are consumed at once; a block recomputes the
@@ -127,7 +127,6 @@ def _row_block(j0, j1, nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_
     au = buf[_AU]
     inv = buf[_INV]
     hh = buf[_H]
-    fbuf = buf[_FLD:_FLD + 6]
     for j in range(j0, j1):
         nb = j * nx
         sb = j * (nx - 1)
@@ -144,13 +143,12 @@ def _row_block(j0, j1, nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_
         m = mass[nb:e]
         im = inv_mass[nb:e]
         q = charge[nb:e]
-        # the field acts where the node is now (the iterate), at t + Δt. For the uniform and
-        # half-space fields field_at is evaluated in each loop that needs it (a compare and a
-        # select, cheaper than a row of stores and loads: the stored variant made an evaluation
-        # ~7 % slower); a field with sources is evaluated once per node into the row buffer
-        # (fields.fill_row_fields / row_field, chosen at compile time by the field's type)
+        # the field at t + Δt where the node is now (the iterate). The uniform and half-space
+        # fields: field_at in each loop that needs it (a compare and a select, cheaper than a
+        # row of stores and loads: the stored variant made an evaluation ~7 % slower); a field
+        # with sources: the value fields.fill_node_fields stored for this attempt (at the
+        # predicted position). fields.node_field, chosen at compile time by the field's type
         px, py, pz = xx[nb:e], xy[nb:e], xz[nb:e]
-        fill_row_fields(fld, px, py, pz, nx, t1, fbuf)
         for i in range(nx):
             hh[i] = dt * im[i]
         for c in range(3):
@@ -162,7 +160,7 @@ def _row_block(j0, j1, nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_
             # yarn force, one difference per node and direction (mirror-exact assembly),
             # then the electric part of eq. 2.7 and gravity
             for i in range(nx):
-                fe, _fb = row_field(fld, fbuf, i, (px[i], py[i], pz[i]), t1)
+                fe, _fb = node_field(fld, nf, nb + i, (px[i], py[i], pz[i]), t1)
                 fc[i] = ((tw[i + 1] - tw[i]) + (tuc[i] - tdc[i])) + (m[i] * g + q[i] * fe[c])
             ac = acc[c]
             v0c = v0[c, nb:e]
@@ -173,7 +171,7 @@ def _row_block(j0, j1, nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_
         ux, uy, uz = uu[0], uu[1], uu[2]
         ax, ay, az = acc[0], acc[1], acc[2]
         for i in range(nx):
-            _fe, fb = row_field(fld, fbuf, i, (px[i], py[i], pz[i]), t1)
+            _fe, fb = node_field(fld, nf, nb + i, (px[i], py[i], pz[i]), t1)
             beta = phi * hh[i] * q[i]
             ux[i] = beta * fb[0]
             uy[i] = beta * fb[1]
@@ -189,7 +187,7 @@ def _row_block(j0, j1, nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_
         fx, fy, fz = f[0], f[1], f[2]
         gx, gy, gz = f1[0, nb:e], f1[1, nb:e], f1[2, nb:e]
         for i in range(nx):
-            _fe, fb = row_field(fld, fbuf, i, (px[i], py[i], pz[i]), t1)
+            _fe, fb = node_field(fld, nf, nb + i, (px[i], py[i], pz[i]), t1)
             fm = magnetic_force(q[i], (vx[i], vy[i], vz[i]), fb)
             gx[i] = fx[i] + fm[0]
             gy[i] = fy[i] + fm[1]
@@ -225,7 +223,7 @@ ROWS_PER_BLOCK = 16
 
 
 @njit(cache=True)
-def fused_iterate(nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_t, x1, v1, f1,
+def fused_iterate(nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, x1, v1, f1,
                   skip_err, err_rows, err_num, err_den, t1, phi, dt, rowbuf):
     """Yarn tensions at the iterate `prev` and the φ-update of every node from the start state
     (x0, v0, f0, alpha_c) into (x1, v1, f1), trial damage into alpha_t (serial).
@@ -238,13 +236,13 @@ def fused_iterate(nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_t, x1
     for b in range(blocks):
         j0 = b * ROWS_PER_BLOCK
         j1 = min(ny, j0 + ROWS_PER_BLOCK)
-        _row_block(j0, j1, nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_t, t1, phi,
+        _row_block(j0, j1, nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, t1, phi,
                    dt, skip_err, x1, v1, f1, err_num, err_den, rowbuf)
     _row_sums(err_num, err_den, nodes.nx, ny, err_rows)
 
 
 @njit(parallel=True)  # never cached on its own: see the docstring
-def fused_iterate_threads(nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_t, x1, v1,
+def fused_iterate_threads(nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, x1, v1,
                           f1, skip_err, err_rows, err_num, err_den, t1, phi, dt, rowbuf):
     """fused_iterate over blocks of ROWS_PER_BLOCK rows in parallel threads; rowbuf (blocks,
     ROWBUF_ROWS, nx + 1). Every value is computed by the same arithmetic as in the serial
@@ -264,6 +262,6 @@ def fused_iterate_threads(nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alp
     for b in prange(blocks):
         j0 = b * ROWS_PER_BLOCK
         j1 = min(ny, j0 + ROWS_PER_BLOCK)
-        _row_block(j0, j1, nodes, yarns, mat, fld, prev, x0, v0, f0, alpha_c, alpha_t, t1, phi,
+        _row_block(j0, j1, nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, t1, phi,
                    dt, skip_err, x1, v1, f1, err_num, err_den, rowbuf[b])
     _row_sums(err_num, err_den, nodes.nx, ny, err_rows)

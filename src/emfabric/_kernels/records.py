@@ -107,6 +107,29 @@ class Field(NamedTuple):
     """The map's E [V/m] and B [T] at the grid points, (nx, ny, nz, 6): Ex Ey Ez Bx By Bz."""
     map_has_e: bool = False
     """Whether the map holds a non-zero E anywhere."""
+    grid_values: np.ndarray | None = None
+    """The source grid (emfabric.source_grid): per group of sources with one waveform, the
+    field per unit of the waveform at the grid points, (groups, nz + 1, ny + 1, nx + 1, 6):
+    b [T] and the vector potential a [T m] (the induced E is −(dw/dt) a); None without a grid
+    (then Numba compiles the lookup away)."""
+    grid_origin: np.ndarray = np.zeros(3)
+    """The grid's first point [m]."""
+    grid_step: np.ndarray = np.ones(3)
+    """The grid's spacing along x, y, z [m]."""
+    grid_cells: np.ndarray = np.zeros(3, dtype=np.int64)
+    """Cells along x, y, z."""
+    grid_exact: np.ndarray = np.zeros((1, 1, 1), dtype=np.uint8)
+    """1 for a cell where interpolating the loops misses the tolerance (near a wire): the
+    loops are evaluated exactly there, (nz, ny, nx)."""
+    grid_wave: np.ndarray = np.zeros(0, dtype=np.int64)
+    """Per group: the loop whose waveform (currents, tables) the group follows; −1 for the
+    permanent magnets (constant, no induced E)."""
+    grid_loops: bool = False
+    """Whether the loops are in the grid (else evaluated exactly everywhere)."""
+    magnets: np.ndarray = np.zeros((0, 13))
+    """Permanent magnets, (count, 13): shape (0 cuboid, 1 cylinder), polarization [T] (3),
+    dimension [m] (3: a b c, or d h 0), position [m] (3), rotation vector [rad] (3). Their
+    field reaches the kernels through the source grid only (magpylib computes it there)."""
 
 
 class Body(NamedTuple):
@@ -189,6 +212,8 @@ class StateArrays(NamedTuple):
     """Yarn damage α, (seg_count,)."""
     body: np.ndarray
     """Body state, (BODY_ROWS, 3)."""
+    e: np.ndarray = np.zeros((3, 0))
+    """The electric field in each node's force f [V/m], (3, node_count)."""
 
 
 class Work(NamedTuple):
@@ -233,6 +258,9 @@ class Work(NamedTuple):
     """Contact point relative to the body centre [m]."""
     c_nrm: np.ndarray
     """Outward surface normal at the contact point."""
+    node_field: np.ndarray
+    """The field of the sources at each node for the attempt (fields.fill_node_fields), (6, N):
+    Ex Ey Ez Bx By Bz."""
     sum_buf: np.ndarray
     reaction: np.ndarray
     """Total contact + friction impulse on the body [N s] and its moment about the centre of
@@ -251,4 +279,4 @@ def make_work(nx: int, ny: int, seg_count: int = 0) -> Work:
                 np.empty((3, n)), np.zeros((2, n)), np.zeros((2, 2, 3, n)),
                 np.empty(nmax, dtype=np.int64), np.empty(nmax, dtype=np.int64),
                 np.empty((2, nmax)), np.empty((3, nmax)), np.empty((3, nmax)),
-                np.empty((3, nmax)), np.empty(nmax), np.zeros((2, 3)))
+                np.empty((3, nmax)), np.zeros((6, n)), np.empty(nmax), np.zeros((2, 3)))

@@ -19,6 +19,12 @@ from emfabric._kernels.contact import (
     node_contact,
     segment_contact,
 )
+from emfabric._kernels.fields import (
+    electric_at_nodes,
+    fill_node_fields,
+    fill_node_fields_threads,
+    with_sources,
+)
 from emfabric._kernels.nodes import fused_iterate, fused_iterate_threads
 from emfabric._kernels.records import BODY_R0, BODY_V, BODY_W, BODY_X
 from emfabric._kernels.shapes import bounding_radius, is_inside
@@ -72,12 +78,14 @@ def fabric_iterate(phys, prev, sin, skip_err, cur, v1, f1, alpha_t, work, rowbuf
     is most of the first run's compile time)."""
     if rowbuf is None:
         if threads is not None:
-            fused_iterate_threads(phys.nodes, phys.yarns, phys.material, phys.field, prev,
+            fused_iterate_threads(phys.nodes, phys.yarns, phys.material, phys.field,
+                                  work.node_field, prev,
                                   sin.x, sin.v, sin.f, sin.alpha, alpha_t, cur, v1, f1, skip_err,
                                   work.err_rows, work.err_num, work.err_den, t1, phi, dt,
                                   threads)
     else:
-        fused_iterate(phys.nodes, phys.yarns, phys.material, phys.field, prev, sin.x, sin.v,
+        fused_iterate(phys.nodes, phys.yarns, phys.material, phys.field, work.node_field,
+                      prev, sin.x, sin.v,
                       sin.f, sin.alpha, alpha_t, cur, v1, f1, skip_err, work.err_rows,
                       work.err_num, work.err_den, t1, phi, dt, rowbuf)
 
@@ -133,6 +141,12 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
         imp_force[c] = 0.0
         imp_moment[c] = 0.0
     copy_into(b_out, b_in)
+    if with_sources(phys.field):
+        # the sources' field at the nodes, once for the attempt (fields.fill_node_fields)
+        if threads is not None:
+            fill_node_fields_threads(phys.field, x0, v0, dt, t1, work.node_field)
+        else:
+            fill_node_fields(phys.field, x0, v0, dt, t1, work.node_field)
     # iterate K-1 is read from `prev`, iterate K written to `cur`; iterate 0 is x0 (ϖ_0 = 1).
     # Plain fixed point: prev and cur alternate between xbuf and x1. Anderson: cur is always
     # x1 = G(prev) and the next prev is the mixed iterate in accel[0]. accel is None for the
@@ -191,4 +205,6 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
         return NOT_CONVERGED, k, err, nc
     if body.active and _nodes_inside(x1, inv_mass, flag, body, b_out) > 0:
         return CONTACT_MISSED, k, err, nc
+    # the electric field in the new state's forces (the energy bookkeeping's field work)
+    electric_at_nodes(phys.field, work.node_field, x1, t1, sout.e)
     return CONVERGED, k, err, nc

@@ -21,8 +21,9 @@ from emfabric.model import Model, State
 from emfabric.scenario import Scenario, ScenarioError, scenario_from_dict
 
 CHECKPOINT = "checkpoint.nc"
-FORMAT = 1
+FORMAT = 2  # 2: the State holds node_e
 _DIMS = {"node_x": ("xyz", "node"), "node_v": ("xyz", "node"), "node_f": ("xyz", "node"),
+         "node_e": ("xyz", "node"),
          "seg_alpha": ("segment",), "body": ("body_row", "xyz"), "energy": ("energy_term",),
          "contact_force": ("xyz",)}
 
