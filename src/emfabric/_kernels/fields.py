@@ -104,10 +104,12 @@ def _grid_fields_typed(grid, fld, x, t, cur, rate, e, b):
     return with_grid
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True)
 def _grid_sum(fld, x, t, cur, rate, e, b):
     """e, b plus the grid's groups at x, and the loops exactly where the grid does not hold
-    them (_grid_lookup)."""
+    them (_grid_lookup). A call, not inlined: the per-point path (body charges, the command
+    line); inlined it reached the node kernel's dead uniform branch and tripped a Numba IR
+    check (the node pass uses the hoisted loop of fill_fields instead)."""
     e, b, loops_in = _grid_lookup(fld.grid_values, fld.grid_origin, fld.grid_step,
                                   fld.grid_cells, fld.grid_exact, fld.grid_wave,
                                   fld.grid_loops, cur, rate, x, e, b)

@@ -1,0 +1,450 @@
+"""Studies: many runs of one scenario, on Dask (``emfabric sweep``, ``ballistic-limit``,
+``design-field``).
+
+A study file names a base scenario, overrides for every case and the axes whose product are
+the cases (or a Latin hypercube over scalar ranges)::
+
+    base = "paper-field"              # built-in name, or a scenario file (relative: to the study)
+    keep_histories = false            # keep each case's run folder (history, snapshots)
+    [set]
+    "fabric.nodes" = [40, 40]
+    [axes]
+    "field.B" = [[0, 0, 0], [0.025, 0, 0], [0.05, 0, 0]]
+    "fabric.material.seed" = [1, 2, 3]
+    # or, instead of [axes]:
+    # [lhs]
+    # samples = 20
+    # seed = 1
+    # ranges = {"projectile.radius" = [0.008, 0.012], "field.B" = ...}   (scalars only)
+
+Each case is a full scenario, validated before anything runs, and keyed by the SHA-256 of its
+TOML text and the package version: its result is one small JSON file in ``DIR/cases/`` written
+atomically when it arrives, so a rerun of the study reuses every finished case (a diverged or
+failed case is finished too: it is recorded with its message) and runs only the rest; a case
+whose worker died is retried by Dask (and if the whole study was killed, simply run on the next
+invocation). The worker receives the scenario's TOML text, never a pickled model.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import math
+import os
+import time
+import tomllib
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from emfabric.scenario import (
+    Scenario,
+    ScenarioError,
+    apply_overrides,
+    load_scenario,
+    scenario_from_dict,
+)
+
+METRICS: dict[str, tuple[str, str]] = {
+    "residual_speed": ("m s-1", "speed of the projectile at the end of the run"),
+    "perforated": ("1", "1 if the projectile passed through the fabric, 0 if not, -1 unknown "
+                        "(failed case)"),
+    "max_tilt": ("rad", "largest angle of the projectile's axis from its initial direction"),
+    "max_yaw": ("rad", "largest angle between the projectile's axis and its velocity"),
+    "final_angular_velocity": ("rad s-1", "angular velocity of the projectile at the end"),
+    "energy_absorbed": ("J", "projectile kinetic energy lost (translation and rotation)"),
+    "broken_yarns": ("1", "yarn segments broken at the end"),
+    "max_deflection": ("m", "largest out-of-plane displacement of the fabric"),
+    "status": ("", "complete | partial | diverged | failed"),
+    "wall_time": ("s", "wall time of the case's run"),
+}
+"""The per-case results (variable name -> (units, meaning)) of results.nc."""
+
+
+class StudyError(ValueError):
+    """A study file or study option that cannot be used: says what and what is allowed."""
+
+
+class _Lhs(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    samples: int = Field(ge=1, le=100000)
+    seed: int = 0
+    ranges: dict[str, tuple[float, float]]
+
+
+class Study(BaseModel):
+    """A study file (see the module docstring)."""
+
+    model_config = ConfigDict(extra="forbid")
+    base: str
+    set: dict[str, Any] = {}
+    axes: dict[str, list[Any]] = {}
+    lhs: _Lhs | None = None
+    keep_histories: bool = False
+
+    @model_validator(mode="after")
+    def _axes_or_lhs(self) -> Study:
+        if self.lhs is not None and self.axes:
+            raise ValueError("give [axes] or [lhs], not both")
+        for key, values in self.axes.items():
+            if not values:
+                raise ValueError(f"axes.{key!r} is empty; allowed: a list of values")
+        return self
+
+
+@dataclass
+class Case:
+    """One case of a study: where it sits on the axes, its overrides and scenario."""
+
+    index: tuple[int, ...]
+    overrides: dict[str, Any]
+    scenario: Scenario
+    key: str = ""
+    text: str = ""
+
+
+@dataclass
+class Plan:
+    """A study's cases, in the order of their axes (the first axis varies slowest)."""
+
+    study: Study
+    base: Scenario
+    dims: list[str]
+    coords: dict[str, list[Any]]
+    cases: list[Case] = field(default_factory=list)
+
+
+def case_key(text: str) -> str:
+    """The case's identity: SHA-256 of its scenario TOML and the package version (16 hex)."""
+    from emfabric import __version__
+
+    return hashlib.sha256(f"{__version__}\n{text}".encode()).hexdigest()[:16]
+
+
+def load_study(path: str | Path) -> Plan:
+    """Read and check a study file; every case's scenario is validated here, before any run
+    (errors name the case's overrides and the key)."""
+    path = Path(path)
+    if not path.is_file():
+        raise StudyError(f"study file {str(path)!r} does not exist")
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise StudyError(f"study file {str(path)!r}: invalid TOML ({err})") from None
+    try:
+        study = Study.model_validate(data)
+    except ValidationError as err:
+        lines = [f"  {'.'.join(str(p) for p in e['loc']) or '(top)'}: {e['msg']}"
+                 for e in err.errors()]
+        raise StudyError(f"study file {str(path)!r}:\n" + "\n".join(lines)) from None
+    base_path = Path(study.base)
+    if base_path.suffix == ".toml" and not base_path.is_absolute():
+        base_path = path.parent / base_path
+    return plan_study(study, str(base_path) if base_path.suffix == ".toml" else study.base)
+
+
+def plan_study(study: Study, base: str) -> Plan:
+    """The cases of a study (scenarios validated; keys computed)."""
+    try:
+        scenario = load_scenario(base, dict(study.set))
+    except ScenarioError as err:
+        raise StudyError(f"base = {study.base!r} with [set]: {err}") from None
+    if study.lhs is not None:
+        dims = ["case"]
+        rng = np.random.default_rng(study.lhs.seed)
+        n = study.lhs.samples
+        coords: dict[str, list[Any]] = {"case": list(range(n))}
+        columns = {}
+        for key, (lo, hi) in study.lhs.ranges.items():
+            if not (math.isfinite(lo) and math.isfinite(hi) and hi >= lo):
+                raise StudyError(f"lhs.ranges.{key!r} = [{lo}, {hi}]: allowed: finite low ≤ "
+                                 f"high")
+            # one point in each of n equal strata, the strata shuffled per key
+            u = (rng.permutation(n) + rng.random(n)) / n
+            columns[key] = [float(lo + (hi - lo) * x) for x in u]
+        combos = [((i,), {k: columns[k][i] for k in columns}) for i in range(n)]
+    else:
+        dims = list(study.axes)
+        coords = {k: list(v) for k, v in study.axes.items()}
+        combos = [(idx, {k: study.axes[k][i] for k, i in zip(dims, idx, strict=True)})
+                  for idx in itertools.product(*(range(len(v)) for v in study.axes.values()))]
+    plan = Plan(study, scenario, dims, coords)
+    for idx, over in combos:
+        try:
+            sc = apply_overrides(scenario, over)
+        except ScenarioError as err:
+            raise StudyError(f"case {over}: {err}") from None
+        text = sc.to_toml()
+        plan.cases.append(Case(idx, over, sc, case_key(text), text))
+    return plan
+
+
+# --- one case, on a worker ------------------------------------------------------------------
+
+def run_case(text: str, out: str | None, threads: int) -> dict[str, Any]:
+    """Run the scenario whose TOML text is given and return its metrics (never raises for a
+    run that diverges or fails: the status and message say so). Called on a Dask worker."""
+    import numba
+
+    from emfabric.integrator import DivergenceError
+    from emfabric.runner import run
+
+    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+    t0 = time.perf_counter()
+    sc = scenario_from_dict(tomllib.loads(text), "<study case>")
+    message = ""
+    try:
+        result = run(sc, out)
+    except (DivergenceError, OSError, RuntimeError, ValueError, ArithmeticError) as exc:
+        result = getattr(exc, "result", None)
+        message = f"{type(exc).__name__}: {exc}"
+        if result is None:
+            return _failed(message, time.perf_counter() - t0)
+    metrics = metrics_of(result)
+    metrics["message"] = message or result.end_reason
+    return metrics
+
+
+def _failed(message: str, wall: float) -> dict[str, Any]:
+    out: dict[str, Any] = {k: math.nan for k in METRICS}
+    out.update(final_angular_velocity=[math.nan] * 3, perforated=-1, broken_yarns=-1,
+               status="failed", message=message, wall_time=wall)
+    return out
+
+
+def metrics_of(result) -> dict[str, Any]:
+    """The METRICS of a finished (or diverged) run."""
+    ds = result.history
+    out: dict[str, Any] = {
+        "status": result.status,
+        "wall_time": float(result.wall_time),
+        "broken_yarns": int(ds["broken_yarns"][-1]),
+        "max_deflection": float(ds["max_deflection"].max()),
+        "perforated": 1 if result.end_reason == "perforation" else 0,
+    }
+    if "projectile_velocity" in ds:
+        v = ds["projectile_velocity"][-1].values
+        ke = ds["kinetic_energy_projectile"].values
+        out.update(residual_speed=float(np.linalg.norm(v)),
+                   max_tilt=float(ds["tilt"].max()),
+                   max_yaw=float(ds["yaw"].max()) if "yaw" in ds else math.nan,
+                   final_angular_velocity=[float(c) for c in ds["angular_velocity"][-1].values],
+                   energy_absorbed=float(ke[0] - ke[-1]))
+    else:
+        out.update(residual_speed=math.nan, max_tilt=math.nan, max_yaw=math.nan,
+                   final_angular_velocity=[math.nan] * 3, energy_absorbed=math.nan)
+    return out
+
+
+# --- running a study ------------------------------------------------------------------------
+
+@dataclass
+class Outcome:
+    """What a study did: counts and the results' path."""
+
+    cases: int
+    ran: int
+    reused: int
+    failed: int
+    results: Path
+    wall_time: float
+
+    def summary(self) -> dict[str, Any]:
+        return {"cases": self.cases, "ran": self.ran, "reused": self.reused,
+                "failed": self.failed, "results": str(self.results),
+                "wall_time": round(self.wall_time, 3)}
+
+
+def _case_file(out: Path, case: Case) -> Path:
+    return out / "cases" / f"{case.key}.json"
+
+
+def read_case(out: Path, case: Case) -> dict[str, Any] | None:
+    """The stored result of a case, or None (absent, unreadable, or another case's)."""
+    path = _case_file(out, case)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+    return data if isinstance(data, dict) and data.get("key") == case.key else None
+
+
+def _store(out: Path, case: Case, metrics: dict[str, Any]) -> None:
+    from emfabric.io.atomic import write_atomic
+
+    record = {"key": case.key, "overrides": case.overrides, **metrics}
+    text = json.dumps(record, indent=1, allow_nan=True)
+    write_atomic(_case_file(out, case), lambda tmp: tmp.write_text(text, encoding="utf-8"))
+
+
+def connect(workers: int | None, scheduler: str | None, threads: int | None
+            ) -> tuple[Any, Any, int]:
+    """(client, cluster or None, Numba threads per case). A local cluster of `workers`
+    processes (default: one per two cores, at least one), or the scheduler at `scheduler`;
+    threads per case default to cores // workers locally (no oversubscription), 1 on a
+    scheduler (its workers' cores are theirs to share)."""
+    try:
+        from dask.distributed import Client, LocalCluster
+    except ImportError:
+        raise StudyError("studies need Dask: pip install 'emfabric[studies]'") from None
+    cores = os.cpu_count() or 1
+    if scheduler is not None:
+        if workers is not None:
+            raise StudyError("--workers and --scheduler exclude each other: the scheduler's "
+                             "workers are started by you")
+        try:
+            client = Client(scheduler, timeout="5s")
+        except (OSError, TimeoutError) as err:
+            raise StudyError(f"cannot reach the Dask scheduler at {scheduler!r} ({err}); "
+                             f"start one with `dask scheduler` and `dask worker ADDRESS`, or "
+                             f"leave out --scheduler for a local cluster") from None
+        return client, None, threads or 1
+    n = workers if workers is not None else max(1, cores // 2)
+    if n < 1:
+        raise StudyError(f"--workers {n}: allowed: 1 or more")
+    per_case = threads or max(1, cores // n)
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                           dashboard_address=None, silence_logs=50,
+                           env={"NUMBA_NUM_THREADS": str(per_case)})
+    return Client(cluster), cluster, per_case
+
+
+def run_cases(cases: list[Case], out: Path, client, threads: int, keep: bool,
+              progress: Callable[[int, int], None] | None = None
+              ) -> Iterator[tuple[Case, dict[str, Any]]]:
+    """Submit the cases to the Dask client and yield (case, metrics) as they arrive, each
+    stored before it is yielded. A worker that dies mid-case: Dask runs the case again
+    (retries)."""
+    from dask.distributed import as_completed
+
+    futures = {}
+    for case in cases:
+        where = str(out / "runs" / case.key) if keep else None
+        fut = client.submit(run_case, case.text, where, threads, key=f"emfabric-case-{case.key}",
+                            pure=False, retries=2)
+        futures[fut] = case
+    done = 0
+    for fut in as_completed(futures):
+        case = futures[fut]
+        try:
+            metrics = fut.result()
+        except Exception as exc:  # the worker died repeatedly, or an unexpected error
+            metrics = _failed(f"{type(exc).__name__}: {exc}", math.nan)
+        _store(out, case, metrics)
+        done += 1
+        if progress is not None:
+            progress(done, len(cases))
+        yield case, metrics
+
+
+def sweep(plan: Plan, out: str | Path, *, workers: int | None = None,
+          scheduler: str | None = None, threads: int | None = None,
+          progress: Callable[[int, int], None] | None = None) -> Outcome:
+    """Run the study's cases that have no stored result, then write DIR/results.nc."""
+    out = Path(out)
+    t0 = time.perf_counter()
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "study.toml").write_text(_study_text(plan), encoding="utf-8")
+    todo = [c for c in plan.cases if read_case(out, c) is None]
+    reused = len(plan.cases) - len(todo)
+    if todo:
+        client, cluster, per_case = connect(workers, scheduler, threads)
+        try:
+            for _case, _m in run_cases(todo, out, client, per_case, plan.study.keep_histories,
+                                       progress):
+                pass
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    results = collect(plan, out)
+    failed = int(sum(1 for c in plan.cases
+                     if (read_case(out, c) or {}).get("status") in ("failed", "diverged")))
+    return Outcome(len(plan.cases), len(todo), reused, failed, results,
+                   time.perf_counter() - t0)
+
+
+def _study_text(plan: Plan) -> str:
+    return json.dumps({"base": plan.study.base, "set": plan.study.set,
+                       "axes": plan.study.axes,
+                       "lhs": None if plan.study.lhs is None else plan.study.lhs.model_dump(),
+                       "keep_histories": plan.study.keep_histories}, indent=1)
+
+
+def collect(plan: Plan, out: Path) -> Path:
+    """Assemble DIR/results.nc from the stored case results (a case not run yet: NaN,
+    status "missing")."""
+    import xarray as xr
+
+    from emfabric import __version__
+    from emfabric.io.netcdf import write_netcdf, xyz_coordinate
+
+    shape = tuple(len(plan.coords[d]) for d in plan.dims)
+    data: dict[str, np.ndarray] = {k: np.full(shape, np.nan) for k in METRICS}
+    data["perforated"] = np.full(shape, -1, dtype=np.int8)
+    data["broken_yarns"] = np.full(shape, -1, dtype=np.int64)
+    data["status"] = np.full(shape, "missing", dtype=object)
+    data["message"] = np.full(shape, "", dtype=object)
+    data["final_angular_velocity"] = np.full((*shape, 3), np.nan)
+    data["case_key"] = np.full(shape, "", dtype=object)
+    for case in plan.cases:
+        rec = read_case(out, case)
+        data["case_key"][case.index] = case.key
+        if rec is None:
+            continue
+        for k in METRICS:
+            if k in rec and rec[k] is not None:
+                data[k][case.index] = rec[k]
+        data["message"][case.index] = str(rec.get("message", ""))
+    dims = plan.dims
+    variables = {}
+    for k, (units, meaning) in METRICS.items():
+        d = (*dims, "xyz") if k == "final_angular_velocity" else dims
+        attrs = {"long_name": meaning}
+        if units:
+            attrs["units"] = units
+        variables[k] = (d, data[k].astype(str) if k == "status" else data[k], attrs)
+    variables["message"] = (dims, data["message"].astype(str),
+                            {"long_name": "why a case did not complete (or its end reason)"})
+    variables["case_key"] = (dims, data["case_key"].astype(str),
+                             {"long_name": "the case's key: cases/<key>.json, runs/<key>/"})
+    coords: dict[str, Any] = {}
+    for d in dims:
+        values = plan.coords[d]
+        arr = np.asarray(values) if d != "case" else np.arange(len(values))
+        if arr.ndim == 1 and arr.dtype.kind in "ifub":
+            coords[d] = (d, arr)
+        elif arr.ndim == 1:
+            coords[d] = (d, arr.astype(str))
+        else:  # a vector-valued axis: an index dimension and the vectors as a variable
+            coords[d] = (d, np.arange(len(values)))
+            comp = f"{d}.component"
+            variables[f"{d}.values"] = ((d, comp), arr.astype(float),
+                                        {"long_name": f"the values of the axis {d}"})
+    if plan.study.lhs is not None:
+        for key in plan.study.lhs.ranges:
+            variables[key] = (("case",), np.array([c.overrides[key] for c in plan.cases]),
+                              {"long_name": f"sampled value of {key} (Latin hypercube)"})
+    name, labels, attrs = xyz_coordinate()
+    coords[name] = (name, labels, attrs)
+    ds = xr.Dataset(variables, coords=coords)
+    ds.attrs.update({"title": "emfabric study results", "emfabric_version": __version__,
+                     "study": _study_text(plan), "base_scenario": plan.base.to_toml(),
+                     "Conventions": "CF-1.10"})
+    path = out / "results.nc"
+    write_netcdf(ds, path)
+    return path
+
+
+def cases_of(out: Path) -> Iterable[dict[str, Any]]:
+    """The stored case records of a study folder."""
+    for p in sorted((out / "cases").glob("*.json")):
+        try:
+            yield json.loads(p.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue

@@ -1,0 +1,148 @@
+"""Studies (issue 14): sweeps on Dask, resumable, fault-tolerant; results.nc."""
+
+import json
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import xarray as xr
+
+pytest.importorskip("dask.distributed")
+
+from emfabric.runner import run  # noqa: E402
+from emfabric.study import load_study, sweep  # noqa: E402
+
+STUDY = """
+base = "demo-small"
+[set]
+"fabric.nodes" = [13, 13]
+"solver.end_time" = 2e-5
+"projectile.gap" = 0.0
+"output.snapshot_interval" = 1e-5
+[axes]
+"field.B" = [[0, 0, 0], [0.05, 0, 0]]
+"fabric.material.seed" = [1, 2]
+"""
+
+
+@pytest.fixture(scope="module")
+def swept(tmp_path_factory):
+    """One 4-case study on two local workers (shared by the tests that only read it)."""
+    root = tmp_path_factory.mktemp("study")
+    (root / "study.toml").write_text(STUDY)
+    plan = load_study(root / "study.toml")
+    outcome = sweep(plan, root / "out", workers=2)
+    return root, plan, outcome
+
+
+def test_sweep_equals_the_cases_run_one_by_one(swept):
+    """Bit for bit: a case on a Dask worker (1 thread) gives the numbers of the same scenario
+    run here (default threads)."""
+    root, plan, outcome = swept
+    assert outcome.summary()["cases"] == 4 and outcome.ran == 4 and outcome.failed == 0
+    ds = xr.open_dataset(outcome.results)
+    assert list(ds["residual_speed"].dims) == ["field.B", "fabric.material.seed"]
+    for case in plan.cases:
+        res = run(case.scenario)
+        hist = res.history
+        at = ds.isel({d: i for d, i in zip(plan.dims, case.index, strict=True)})
+        v = hist["projectile_velocity"][-1].values
+        assert float(at["residual_speed"]) == float(np.linalg.norm(v))
+        assert np.array_equal(at["final_angular_velocity"].values,
+                              hist["angular_velocity"][-1].values)
+        assert float(at["max_tilt"]) == float(hist["tilt"].max())
+        assert float(at["max_deflection"]) == float(hist["max_deflection"].max())
+        assert int(at["broken_yarns"]) == int(hist["broken_yarns"][-1])
+        assert str(at["status"].values) == res.status
+    # the cases are four different runs
+    assert len(set(ds["max_deflection"].values.ravel().tolist())) == 4
+
+
+def test_results_file_names_axes_units_and_vectors(swept):
+    _root, _plan, outcome = swept
+    ds = xr.open_dataset(outcome.results)
+    assert list(ds["field.B"].values) == [0, 1]  # a vector axis: its index ...
+    assert ds["field.B.values"].values.tolist() == [[0, 0, 0], [0.05, 0, 0]]  # ... and values
+    assert ds["fabric.material.seed"].values.tolist() == [1, 2]
+    assert ds["residual_speed"].attrs["units"] == "m s-1"
+    assert ds["max_tilt"].attrs["units"] == "rad"
+    for name in ("residual_speed", "perforated", "max_tilt", "max_yaw",
+                 "final_angular_velocity", "energy_absorbed", "broken_yarns", "max_deflection",
+                 "status", "wall_time"):
+        assert name in ds
+    assert "emfabric_version" in ds.attrs and "demo-small" in ds.attrs["study"]
+
+
+def test_rerun_runs_nothing_and_a_deleted_case_alone_reruns(swept):
+    root, plan, _outcome = swept
+    again = sweep(plan, root / "out", workers=1)
+    assert (again.ran, again.reused) == (0, 4)
+    victim = plan.cases[2]
+    (root / "out" / "cases" / f"{victim.key}.json").unlink()
+    third = sweep(plan, root / "out", workers=1)
+    assert (third.ran, third.reused) == (1, 3)
+
+
+def test_a_diverging_case_is_recorded_and_the_others_complete(tmp_path):
+    study = tmp_path / "div.toml"
+    study.write_text(STUDY.replace('"field.B" = [[0, 0, 0], [0.05, 0, 0]]\n'
+                                   '"fabric.material.seed" = [1, 2]',
+                                   '"field.E" = [[0, 0, 0], [1e12, 0, 0]]'))
+    out = tmp_path / "out"
+    res = subprocess.run([sys.executable, "-m", "emfabric", "sweep", str(study), "--out",
+                          str(out), "--workers", "1", "--json", "-q"], capture_output=True,
+                         text=True)
+    assert res.returncode == 0, res.stderr
+    summary = json.loads(res.stdout)
+    assert (summary["cases"], summary["ran"], summary["reused"], summary["failed"]) == \
+        (2, 2, 0, 1)
+    ds = xr.open_dataset(out / "results.nc")
+    assert ds["status"].values.tolist() == ["complete", "diverged"]
+    assert "energy balance" in str(ds["message"].values[1])
+
+
+def test_unreachable_scheduler_fails_at_once(tmp_path):
+    study = tmp_path / "s.toml"
+    study.write_text(STUDY)
+    t0 = time.monotonic()
+    res = subprocess.run([sys.executable, "-m", "emfabric", "sweep", str(study), "--out",
+                          str(tmp_path / "o"), "--scheduler", "tcp://127.0.0.1:9"],
+                         capture_output=True, text=True)
+    assert res.returncode == 2
+    assert "cannot reach the Dask scheduler at 'tcp://127.0.0.1:9'" in res.stderr
+    assert "Traceback" not in res.stderr
+    assert time.monotonic() - t0 < 60
+
+
+def test_latin_hypercube_puts_one_sample_in_each_stratum(tmp_path):
+    study = tmp_path / "lhs.toml"
+    study.write_text('base = "demo-small"\n[lhs]\nsamples = 8\nseed = 3\n'
+                     '[lhs.ranges]\n"projectile.radius" = [0.008, 0.012]\n'
+                     '"field.B" = [0.0, 0.05]\n')
+    with pytest.raises(Exception, match="field.B"):  # a vector key cannot take a scalar
+        load_study(study)
+    study.write_text('base = "demo-small"\n[lhs]\nsamples = 8\nseed = 3\n'
+                     '[lhs.ranges]\n"projectile.radius" = [0.008, 0.012]\n'
+                     '"projectile.mass" = [0.02, 0.04]\n')
+    plan = load_study(study)
+    assert len(plan.cases) == 8 and plan.dims == ["case"]
+    for key, (lo, hi) in (("projectile.radius", (0.008, 0.012)),
+                          ("projectile.mass", (0.02, 0.04))):
+        u = np.array([(c.overrides[key] - lo) / (hi - lo) for c in plan.cases])
+        assert sorted(np.floor(u * 8).astype(int)) == list(range(8))
+
+
+def test_study_file_errors_say_what(tmp_path):
+    from emfabric.study import StudyError
+
+    bad = tmp_path / "bad.toml"
+    bad.write_text('base = "demo-small"\n[axes]\n"fabric.nodez" = [[4, 4]]\n')
+    with pytest.raises(StudyError, match="nodez"):
+        load_study(bad)
+    bad.write_text('base = "demo-small"\n[axes]\n"fabric.nodes" = []\n')
+    with pytest.raises(StudyError, match="empty"):
+        load_study(bad)
+    with pytest.raises(StudyError, match="does not exist"):
+        load_study(tmp_path / "nope.toml")
