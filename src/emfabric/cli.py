@@ -342,7 +342,5 @@ def main() -> None:  # pragma: no cover - console entry
         sys.exit(2)
 
 
-from emfabric import (
-    cli_plot,  # noqa: E402,F401  (registers `plot` and `animate` after these)
-    cli_study,  # noqa: E402,F401  (registers `sweep`)
-)
+# registers `plot`, `animate` (cli_plot) and the study commands (cli_study) after these
+from emfabric import cli_plot, cli_study  # noqa: E402,F401
