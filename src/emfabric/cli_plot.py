@@ -21,12 +21,19 @@ def plot(
     out: Annotated[Path | None, typer.Option(
         "--out", "-o", help="Figure folder (default: <first run>/figures)")] = None,
 ) -> None:
-    """Draw the spin, impact-sequence, energy and velocity figures (PNG and PDF)."""
+    """Draw the spin, impact-sequence, energy and velocity figures (PNG and PDF); for a study
+    folder (results.nc), each metric against the study's axes."""
     from emfabric.plots import plot_runs
 
     show_messages()
     try:
-        files = plot_runs(runs, out)
+        if len(runs) == 1 and (runs[0] / "results.nc").is_file() and \
+                not (runs[0] / "history.nc").is_file():
+            from emfabric.study_plots import study_figures
+
+            files = study_figures(runs[0], out)
+        else:
+            files = plot_runs(runs, out)
     except FileNotFoundError as err:
         raise _missing(err) from None
     for f in files:

@@ -86,3 +86,79 @@ def sweep(
     if summary["failed"] and not json_summary:
         console.print("[yellow]the failed cases' messages are in results.nc (variable "
                       "message) and cases/<key>.json[/]")
+
+
+def _scenario(name: str, overrides: list[str] | None):
+    from emfabric.cli import _load
+
+    return _load(name, overrides)
+
+
+SetOpt = Annotated[list[str] | None, typer.Option(
+    "--set", help="Override a scenario value, e.g. --set fabric.nodes=[40,40] (repeatable)")]
+
+
+@app.command()
+def estimate(
+    scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name")],
+    target_tilt: Annotated[float, typer.Option("--target-tilt", help="Tilt to reach [rad]")],
+    by: Annotated[float, typer.Option("--by", help="Time by which to reach it [s]")],
+    set_: SetOpt = None,
+) -> None:
+    """The paper's back-of-envelope field for a target tilt (eqs 5.3-5.4, with the node
+    charge): JSON on stdout."""
+    from emfabric.design import estimate as eq54
+
+    sc = _scenario(scenario, set_)
+    try:
+        est = eq54(sc, target_tilt, by)
+    except ValueError as err:
+        error(str(err))
+        raise typer.Exit(2) from None
+    emit(json.dumps(est.as_dict()))
+
+
+@app.command("design-field")
+def design_field(
+    scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name")],
+    target_tilt: Annotated[float, typer.Option("--target-tilt", help="Tilt to reach [rad]")],
+    by: Annotated[float, typer.Option("--by", help="Time by which to reach it [s]")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Folder: design.json, the probes' "
+                                                          "cases, the figure")],
+    workers: WorkersOpt = None,
+    scheduler: SchedulerOpt = None,
+    threads: ThreadsOpt = None,
+    tolerance: Annotated[float, typer.Option(
+        "--tolerance", help="Relative width of the final bracket on the field scale")] = 0.02,
+    set_: SetOpt = None,
+    json_summary: Annotated[bool, typer.Option("--json", help="Print the result as JSON on "
+                                                              "stdout")] = False,
+) -> None:
+    """The smallest scale of the scenario's field whose run reaches the target tilt by the
+    given time, found by a bracketed search over runs on Dask (eq 5.4 beside it)."""
+    from emfabric.design import design_field as search
+    from emfabric.io.atomic import write_atomic
+    from emfabric.study import StudyError
+
+    sc = _scenario(scenario, set_)
+    if not 0.0 < tolerance < 1.0:
+        error(f"--tolerance {tolerance}: allowed: between 0 and 1")
+        raise typer.Exit(2)
+    try:
+        res = search(sc, target_tilt, by, out, workers=workers, scheduler=scheduler,
+                     threads=threads, rel_tol=tolerance)
+    except (StudyError, ValueError) as err:
+        error(str(err))
+        raise typer.Exit(2) from None
+    text = json.dumps(res, indent=1)
+    write_atomic(out / "design.json", lambda tmp: tmp.write_text(text, encoding="utf-8"))
+    from emfabric.study_plots import design_figure
+
+    fig = design_figure(res, out / "design.png")
+    if json_summary:
+        emit(json.dumps({k: res[k] for k in ("scale", "B_centre", "estimate_eq54",
+                                              "target_tilt", "by", "runs")}))
+    else:
+        console.print(f"field × {res['scale']:.4g} (|B| = {res['B_centre_norm']:.4g} T at the "
+                      f"sheet centre) tilts by {target_tilt} rad within {by} s; eq 5.4 says "
+                      f"{res['estimate_eq54']:.3g} T; {res['runs']} runs; figure {fig}")

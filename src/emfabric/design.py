@@ -1,0 +1,232 @@
+"""Field design: the paper's back-of-envelope field for a target tilt (eqs 5.3–5.4), and the
+field found by simulation (``emfabric estimate``, ``emfabric design-field``).
+
+Eq 5.3 balances the moment that gives a body of inertia I, at rest, the tilt Θ* after δt under
+constant angular acceleration, I · 2Θ*/δt², with the moment of the friction the field's force
+q v × B can mobilise on the N_c nodes in contact at the body's radius R: μ_s N_c q ‖v‖ ‖B‖ R.
+The paper prints it without the charge q (its nodes carry q = 1 C); derived, it is
+
+    ‖B‖ = 2 I Θ* / (δt² q ‖v‖ μ_s N_c R)                                     (eq 5.4)
+
+with N_c = π R² / (Δx Δy) the nodes under the body's cross-section (Δx, Δy the node spacing),
+q the charge of a node, ‖v‖ the striking speed, I the moment of inertia about the field's
+direction. It is an order of magnitude: the simulation sharpens it (design_field).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from emfabric.scenario import Scenario
+
+
+@dataclass
+class Estimate:
+    """Eq 5.4 and its inputs (SI units)."""
+
+    B: float
+    moment: float
+    inertia: float
+    charge: float
+    speed: float
+    static_friction: float
+    nodes_in_contact: float
+    radius: float
+    tilt: float
+    by: float
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"estimate_eq54": self.B, "moment_eq53": self.moment,
+                "inputs": {"I": self.inertia, "q": self.charge, "speed": self.speed,
+                           "mu_s": self.static_friction, "N_c": self.nodes_in_contact,
+                           "R": self.radius, "target_tilt": self.tilt, "by": self.by},
+                "units": {"estimate_eq54": "T", "moment_eq53": "N m", "I": "kg m2",
+                          "q": "C", "speed": "m s-1", "R": "m", "target_tilt": "rad",
+                          "by": "s"}}
+
+
+def estimate(scenario: Scenario, tilt: float, by: float) -> Estimate:
+    """Eq 5.4 for the scenario's projectile and fabric (see the module docstring)."""
+    from emfabric.builder import build_model
+
+    if not (tilt > 0.0 and math.isfinite(tilt)):
+        raise ValueError(f"--target-tilt {tilt}: allowed: a positive angle [rad]")
+    if not (by > 0.0 and math.isfinite(by)):
+        raise ValueError(f"--by {by}: allowed: a positive time [s]")
+    model = build_model(scenario)
+    if not model.has_body:
+        raise ValueError("the scenario has no projectile (projectile.shape = \"none\"): there "
+                         "is nothing to tilt")
+    fab = scenario.fabric
+    nx, ny = model.nx, model.ny
+    dx = fab.size[0] / (nx - 1)
+    dy = fab.size[1] / (ny - 1)
+    radius = float(model.body.radius)
+    n_c = math.pi * radius**2 / (dx * dy)
+    free = model.nodes.inv_mass > 0
+    q = float(np.mean(np.abs(model.nodes.charge[free])))
+    speed = float(np.linalg.norm(model.body_v0))
+    b = np.asarray(scenario.field.B, dtype=float)
+    axis = b / np.linalg.norm(b) if np.linalg.norm(b) > 0 else np.array([1.0, 0.0, 0.0])
+    inertia = float(axis @ model.body.inertia @ axis)
+    mu = float(scenario.contact.static_friction)
+    moment = inertia * 2.0 * tilt / by**2
+    denom = q * speed * mu * n_c * radius
+    if not denom > 0.0:
+        raise ValueError(f"eq 5.4 needs charged nodes, a moving projectile and friction (q = "
+                         f"{q}, speed = {speed}, static_friction = {mu})")
+    return Estimate(moment / denom, moment, inertia, q, speed, mu, n_c, radius, tilt, by)
+
+
+def scale_field(scenario: Scenario, s: float) -> Scenario:
+    """The scenario with every magnetic source scaled by s: the uniform B, the uniform
+    sources' B, the loops' and solenoids' currents (tables too), the magnets' polarization and
+    the maps' scale (E of a map scales with it; a uniform E does not)."""
+    data = scenario.to_dict()
+    fld = data.setdefault("field", {})
+    fld["B"] = [s * c for c in scenario.field.B]
+    sources = []
+    for src in scenario.field.sources:
+        d = src.model_dump(exclude_none=True)
+        if src.kind == "uniform":
+            d["B"] = [s * c for c in src.B]
+        elif src.kind in ("loop", "solenoid"):
+            if src.table is not None:
+                d["table"] = [[t, s * i] for t, i in src.table]
+            else:
+                d["current"] = s * src.current
+        elif src.kind == "magnet":
+            d["polarization"] = [s * c for c in src.polarization]
+        elif src.kind == "map":
+            d["scale"] = s * src.scale
+        sources.append(d)
+    fld["sources"] = sources
+    from emfabric.scenario import scenario_from_dict
+
+    return scenario_from_dict(data, f"{scenario.name} with the field × {s:g}")
+
+
+def field_at_centre(scenario: Scenario, t: float) -> list[float]:
+    """B [T] at the sheet's centre (the origin) at time t."""
+    from emfabric.builder import build_field
+    from emfabric.fields import fields_at
+
+    return [float(c) for c in fields_at(build_field(scenario), [[0.0, 0.0, 0.0]], t)[1][0]]
+
+
+@dataclass
+class Probe:
+    scale: float
+    tilt: float
+    status: str
+
+
+def design_field(scenario: Scenario, tilt: float, by: float, out, *,
+                 workers: int | None = None, scheduler: str | None = None,
+                 threads: int | None = None, rel_tol: float = 0.02,
+                 max_rounds: int = 12, progress=None) -> dict[str, Any]:
+    """The smallest field scale s whose run tilts the projectile by `tilt` before `by`, by a
+    bracketed search over runs on Dask (each round runs one probe per worker, at least two):
+    bracket from the eq 5.4 scale upwards and downwards by factors of 2, then shrink the bracket
+    [s_lo (tilt below target), s_hi (reached)] by k-section until s_hi/s_lo − 1 ≤ rel_tol.
+    Assumes the max tilt grows with the field near the answer (it is not always monotonic:
+    the probes are all written to probes.json, and the figure shows them)."""
+    from pathlib import Path
+
+    from emfabric.study import Case, StudyError, case_key, connect, read_case, run_cases
+
+    out = Path(out)
+    est = estimate(scenario, tilt, by)
+    b0 = np.linalg.norm(field_at_centre(scenario, by))
+    if not b0 > 0.0:
+        raise StudyError("the scenario's field is zero at the sheet's centre at the target "
+                         "time: nothing to scale (give it a field, e.g. --set field.B=[1,0,0])")
+    base = scenario.replace(**{"solver.end_time": by})
+    probes: dict[float, Probe] = {}
+
+    def case_for(s: float) -> Case:
+        sc = scale_field(base, s)
+        text = sc.to_toml()
+        return Case((len(probes),), {"scale": s}, sc, case_key(text), text)
+
+    client = cluster = None
+    try:
+        def measure(scales: list[float]) -> None:
+            nonlocal client, cluster
+            cases = [case_for(s) for s in scales]
+            todo = [c for c in cases if read_case(out, c) is None]
+            if todo:
+                if client is None:
+                    client, cluster, per = connect(workers, scheduler, threads)
+                    measure.threads = per  # type: ignore[attr-defined]
+                list(run_cases(todo, out, client, measure.threads, False))  # type: ignore
+            for s, c in zip(scales, cases, strict=True):
+                rec = read_case(out, c) or {}
+                status = str(rec.get("status", "failed"))
+                # a run that stopped early (diverged, failed) says nothing about the tilt by
+                # the target time: it brackets nothing
+                probes[s] = Probe(s, float(rec.get("max_tilt", math.nan))
+                                  if status == "complete" else math.nan, status)
+            if progress is not None:
+                progress(len(probes))
+
+        width = 2 if workers is None else max(2, workers)
+        s_est = est.B / b0
+        measure([s_est * 2.0 ** (k - width // 2) for k in range(width)])
+        lo = hi = None
+        for _ in range(max_rounds):
+            reached = sorted(x for x, p in probes.items() if p.tilt >= tilt)
+            missed = sorted(x for x, p in probes.items() if p.tilt < tilt)  # NaN: neither
+            if reached and (not missed or missed[0] > reached[0]) and \
+                    reached[0] < 1e-6 * s_est:
+                hi, lo = reached[0], 0.0  # reached with (almost) no field
+                break
+            if reached and any(m < reached[0] for m in missed):
+                hi = reached[0]
+                lo = max(m for m in missed if m < hi)
+                break
+            if reached:  # every probe reached the target: go down
+                measure([min(probes) / 2.0 ** (k + 1) for k in range(width)])
+            else:  # none did: go up, unless the runs stop completing up there
+                top = max(probes)
+                if probes[top].status != "complete":
+                    ok = [x for x, p in probes.items() if p.status == "complete"]
+                    best = max(ok, key=lambda x: probes[x].tilt, default=None)
+                    raise StudyError(
+                        f"the runs stop completing above {max(ok, default=0.0):.3g} × the "
+                        f"scenario's field ({probes[top].status} at {top:.3g} ×) before any "
+                        f"reached a tilt of {tilt} rad by {by} s"
+                        + ("" if best is None else f"; the largest tilt of a complete run: "
+                           f"{probes[best].tilt:.3g} rad at {best:.3g} ×")
+                        + f"; the probes are in {out / 'cases'}")
+                measure([top * 2.0 ** (k + 1) for k in range(width)])
+        if hi is None:
+            seen = [p.tilt for p in probes.values() if math.isfinite(p.tilt)]
+            raise StudyError(f"no bracket for a tilt of {tilt} rad by {by} s between "
+                             f"{min(probes):.3g} and {max(probes):.3g} × the scenario's field "
+                             f"(largest tilt seen: {max(seen, default=math.nan):.3g} rad)")
+        rounds = 0
+        while hi - lo > rel_tol * hi and rounds < max_rounds:
+            k = width
+            scales = [lo + (hi - lo) * (i + 1) / (k + 1) for i in range(k)]
+            measure(scales)
+            for s in scales:
+                if probes[s].tilt >= tilt:
+                    hi = min(hi, s)
+            lo = max([lo] + [s for s in scales if s < hi and probes[s].tilt < tilt])
+            rounds += 1
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+    b_centre = field_at_centre(scale_field(scenario, hi), by)
+    return {"scale": hi, "B_centre": b_centre, "B_centre_norm": float(np.linalg.norm(b_centre)),
+            "estimate_eq54": est.B, "target_tilt": tilt, "by": by, "bracket": [lo, hi],
+            "probes": [{"scale": p.scale, "max_tilt": p.tilt, "status": p.status}
+                       for p in sorted(probes.values(), key=lambda p: p.scale)],
+            "runs": len(probes)}
