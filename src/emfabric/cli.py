@@ -14,7 +14,15 @@ from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
-from emfabric.cli_app import app, console, emit, error, out_console, show_messages
+from emfabric.cli_app import (
+    app,
+    console,
+    emit,
+    error,
+    load_or_exit,
+    out_console,
+    show_messages,
+)
 from emfabric.scenario import (
     ScenarioError,
     apply_overrides,
@@ -23,14 +31,7 @@ from emfabric.scenario import (
     parse_override,
 )
 
-
-def _load(scenario: str, overrides: list[str] | None):
-    try:
-        pairs = dict(parse_override(o) for o in (overrides or []))
-        return load_scenario(scenario, pairs)
-    except ScenarioError as err:
-        error(str(err))
-        raise typer.Exit(2) from None
+_load = load_or_exit
 
 
 @app.command()

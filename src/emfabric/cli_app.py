@@ -61,3 +61,15 @@ def show_messages() -> None:
         logger.addHandler(RichHandler(console=console, show_time=False, show_path=False,
                                       show_level=False, markup=False))
     logger.setLevel(logging.INFO)
+
+
+def load_or_exit(scenario: str, overrides: list[str] | None):
+    """The scenario with its --set overrides, or a clear error and exit status 2."""
+    from emfabric.scenario import ScenarioError, load_scenario, parse_override
+
+    try:
+        pairs = dict(parse_override(o) for o in (overrides or []))
+        return load_scenario(scenario, pairs)
+    except ScenarioError as err:
+        error(str(err))
+        raise typer.Exit(2) from None

@@ -10,7 +10,7 @@ from typing import Annotated
 import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from emfabric.cli_app import app, console, emit, error
+from emfabric.cli_app import app, console, emit, error, load_or_exit
 
 WorkersOpt = Annotated[int | None, typer.Option(
     "--workers", help="Local Dask cluster of N worker processes (default: one per two cores)")]
@@ -89,9 +89,7 @@ def sweep(
 
 
 def _scenario(name: str, overrides: list[str] | None):
-    from emfabric.cli import _load
-
-    return _load(name, overrides)
+    return load_or_exit(name, overrides)
 
 
 SetOpt = Annotated[list[str] | None, typer.Option(
