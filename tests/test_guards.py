@@ -236,3 +236,26 @@ def test_sigkill_while_compiling_leaves_a_readable_history(tmp_path):
     assert proc.returncode == -signal.SIGKILL
     ds = xr.open_dataset(out / "history.nc")
     assert ds.attrs["status"] == "partial" and ds.attrs["scenario_name"] == "demo-small"
+
+
+def test_max_stretch_counts_only_the_yarns_not_broken():
+    """A node whose two yarns are broken flies off: their 'stretch' is no load and must not
+    trip the plausibility limit (it did: fragments of a perforated sheet stopped runs)."""
+    import numpy as np
+
+    from emfabric._kernels.diagnostics import COUNT, STRETCH, fabric_diagnostics
+
+    model = build_model(_small(**{"fabric.nodes": [5, 5]}))
+    x = model.nodes.x0.copy()
+    x[:, 0] += [1.0, 1.0, -1.0]  # the corner node, 1.7 m away
+    alpha = np.ones(model.seg_count)
+    ends = model.yarns.ends
+    touching = np.where((ends[:, 0] == 0) | (ends[:, 1] == 0))[0]
+    assert len(touching) == 2
+    out = np.zeros(COUNT)
+    args = (model.physics, x, np.zeros_like(x), alpha, np.zeros(3), np.array([0, 0, -1.0]), out)
+    fabric_diagnostics(*args)
+    assert out[STRETCH] > 10.0
+    alpha[touching] = 0.0
+    fabric_diagnostics(*args)
+    assert out[STRETCH] == 1.0

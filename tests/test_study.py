@@ -201,3 +201,54 @@ def test_design_field_brackets_the_target_tilt(tmp_path):
     assert tilt[hi] >= 0.01 > tilt[lo]
     assert out["B_centre"][0] == pytest.approx(0.05 * hi, rel=1e-12)
     assert out["estimate_eq54"] > 0 and (tmp_path / "design.png").is_file()
+
+
+# --- ballistic limit --------------------------------------------------------------------------
+
+def test_lambert_jonas_fit_recovers_known_parameters():
+    from emfabric.ballistic import fit_lambert_jonas, lambert_jonas
+
+    rng = np.random.default_rng(4)
+    a, p, vbl = 0.85, 2.4, 180.0
+    vs = np.linspace(190.0, 400.0, 12)
+    vr = lambert_jonas(vs, a, p, vbl) + rng.normal(0.0, 0.5, vs.size)
+    fit = fit_lambert_jonas(vs, vr, 170.0)
+    assert fit["a"] == pytest.approx(a, rel=0.03)
+    assert fit["p"] == pytest.approx(p, rel=0.08)
+    assert fit["v_bl"] == pytest.approx(vbl, abs=3.0)
+    assert lambert_jonas(np.array([150.0]), a, p, vbl)[0] == 0.0
+
+
+def test_logistic_v50_fit_recovers_a_known_v50():
+    from emfabric.ballistic import fit_v50
+
+    rng = np.random.default_rng(9)
+    v50, s = 210.0, 6.0
+    v = rng.uniform(180.0, 240.0, 1500)
+    y = (rng.random(v.size) < 1.0 / (1.0 + np.exp(-(v - v50) / s))).astype(int)
+    fit = fit_v50(v, y, bootstrap=100)
+    assert fit["v50"] == pytest.approx(v50, abs=1.0)
+    assert fit["scale"] == pytest.approx(s, rel=0.15)
+    assert fit["ci95"][0] < v50 < fit["ci95"][1] and fit["ci95"][1] - fit["ci95"][0] < 3.0
+    with pytest.raises(ValueError, match="perforate and shots that do not"):
+        fit_v50([1.0, 2.0], [1, 1])
+
+
+def test_ballistic_limit_end_to_end(tmp_path):
+    """The shipped rupture scenario, coarsened: V_BL bracketed to the tolerance between a
+    stopped and a perforating shot; the Lambert-Jonas fit passes near the shots; files."""
+    res = subprocess.run([sys.executable, "-m", "emfabric", "ballistic-limit", "rupture",
+                          "--set", "fabric.nodes=[11,11]",
+                          "--out", str(tmp_path), "--workers", "2", "--tolerance", "8",
+                          "--json"], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    out = json.loads(res.stdout)
+    lo, hi = out["v_bl_bracket"]
+    assert hi - lo <= 8.0 and lo < out["v_bl"] < hi
+    full = json.loads((tmp_path / "ballistic.json").read_text())
+    det = {s["speed"]: s for s in full["shots"] if s["seed"] is None}
+    assert det[lo]["perforated"] == 0 and det[hi]["perforated"] == 1
+    lj = out["lambert_jonas"]
+    assert 0.5 * lo < lj["v_bl"] < 1.5 * hi and lj["rms_residual"] < 0.1 * hi
+    ds = xr.open_dataset(tmp_path / "ballistic.nc")
+    assert ds.sizes["shot"] == out["runs"] and (tmp_path / "ballistic.png").is_file()

@@ -160,3 +160,52 @@ def design_field(
         console.print(f"field × {res['scale']:.4g} (|B| = {res['B_centre_norm']:.4g} T at the "
                       f"sheet centre) tilts by {target_tilt} rad within {by} s; eq 5.4 says "
                       f"{res['estimate_eq54']:.3g} T; {res['runs']} runs; figure {fig}")
+
+
+@app.command("ballistic-limit")
+def ballistic_limit(
+    scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name (yarns "
+                                                 "must break: e.g. `rupture`)")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Folder: ballistic.json, .nc, .png "
+                                                          "and the shots' cases")],
+    seeds: Annotated[int, typer.Option("--seeds", help="Seeded shots (modulus scatter and "
+                                                       "impact-point jitter) for V50")] = 0,
+    tolerance: Annotated[float, typer.Option(
+        "--tolerance", help="Width of the final V_BL bracket [m/s]")] = 2.0,
+    workers: WorkersOpt = None,
+    scheduler: SchedulerOpt = None,
+    threads: ThreadsOpt = None,
+    set_: SetOpt = None,
+    json_summary: Annotated[bool, typer.Option("--json", help="Print the result as JSON on "
+                                                              "stdout")] = False,
+) -> None:
+    """V_BL of the model by bracketing and bisecting the striking speed, the Lambert-Jonas fit
+    of the residual speeds above it, and with --seeds, V50 and its spread (runs on Dask)."""
+    from emfabric.ballistic import ballistic_limit as search
+    from emfabric.ballistic import write_outputs
+    from emfabric.study import StudyError
+
+    sc = _scenario(scenario, set_)
+    if seeds < 0:
+        error(f"--seeds {seeds}: allowed: 0 or more")
+        raise typer.Exit(2)
+    try:
+        res = search(sc, out, seeds=seeds, tolerance=tolerance, workers=workers,
+                     scheduler=scheduler, threads=threads)
+    except (StudyError, ValueError, RuntimeError) as err:
+        error(str(err))
+        raise typer.Exit(2) from None
+    files = write_outputs(res, out)
+    if json_summary:
+        keep = ("v_bl", "v_bl_bracket", "lambert_jonas", "v50", "runs")
+        emit(json.dumps({k: res[k] for k in keep if k in res}))
+    else:
+        lj = res["lambert_jonas"]
+        console.print(f"V_BL = {res['v_bl']:.4g} m/s (bracket {res['v_bl_bracket'][0]:.4g} – "
+                      f"{res['v_bl_bracket'][1]:.4g}); Lambert–Jonas a = {lj['a']:.3g}, "
+                      f"p = {lj['p']:.3g}, V_BL = {lj['v_bl']:.4g} m/s; {res['runs']} runs; "
+                      f"{', '.join(str(f) for f in files)}")
+        if "v50" in res:
+            v = res["v50"]
+            console.print(f"V50 = {v['v50']:.4g} m/s, 95 % [{v['ci95'][0]:.4g}, "
+                          f"{v['ci95'][1]:.4g}], σ = {v['sigma']:.3g} m/s")

@@ -31,7 +31,7 @@ RECORD: dict[str, tuple[int, str, str]] = {
     "contact_nodes": (1, "1", "fabric nodes in contact (plus yarn segments in contact, with "
                               "segment contact on)"),
     "max_deflection": (1, "m", "largest out-of-plane node displacement"),
-    "max_stretch": (1, "1", "largest yarn stretch U = L/L0"),
+    "max_stretch": (1, "1", "largest stretch U = L/L0 of the yarns not broken"),
     "fabric_momentum": (3, "kg m s-1", "linear momentum of the fabric"),
     "fabric_angular_momentum": (3, "kg m2 s-1", "angular momentum of the fabric about the origin"),
     "projectile_momentum": (3, "kg m s-1", "linear momentum of the projectile"),

@@ -52,8 +52,10 @@ from emfabric.scenario import (
 
 METRICS: dict[str, tuple[str, str]] = {
     "residual_speed": ("m s-1", "speed of the projectile at the end of the run"),
-    "perforated": ("1", "1 if the projectile passed through the fabric, 0 if not, -1 unknown "
-                        "(failed case)"),
+    "perforated": ("1", "1 if the run ended by perforation (or at end_time moving forward, "
+                        "past the sheet's plane and clear of the fabric), 0 if it rebounded, "
+                        "stopped or never reached the sheet, -1 undecided (still in contact "
+                        "at end_time, diverged, failed)"),
     "max_tilt": ("rad", "largest angle of the projectile's axis from its initial direction"),
     "max_yaw": ("rad", "largest angle between the projectile's axis and its velocity"),
     "final_angular_velocity": ("rad s-1", "angular velocity of the projectile at the end"),
@@ -225,10 +227,31 @@ def metrics_of(result) -> dict[str, Any]:
         "wall_time": float(result.wall_time),
         "broken_yarns": int(ds["broken_yarns"][-1]),
         "max_deflection": float(ds["max_deflection"].max()),
-        "perforated": 1 if result.end_reason == "perforation" else 0,
     }
     if "projectile_velocity" in ds:
         v = ds["projectile_velocity"][-1].values
+        v0 = ds["projectile_velocity"][0].values
+        d = v0 / max(float(np.linalg.norm(v0)), 1e-300)
+        forward = float(v @ d)
+        # how far the centre is past the sheet's plane (z = 0), along the flight
+        past = float(ds["projectile_position"][-1].values @ d)
+        clear = past > float(result.model.geometry.bound)
+        touching = int(ds["contact_nodes"][-1]) > 0
+        # perforation: the run ended so, or at end_time moving forward, clear of the sheet's
+        # plane and of the fabric; rebound, never touched, or moving back: not; still in
+        # contact and moving on at end_time, diverged, failed: unknown (-1)
+        if result.status not in ("complete", "partial"):
+            out["perforated"] = -1
+        elif result.end_reason == "perforation":
+            out["perforated"] = 1
+        elif result.end_reason in ("rebound", "never touched") or forward <= 0.0:
+            out["perforated"] = 0
+        elif clear and not touching:
+            out["perforated"] = 1
+        elif not clear and not touching and int(ds["contact_nodes"].max()) == 0:
+            out["perforated"] = 0  # has not reached the sheet yet
+        else:
+            out["perforated"] = -1
         ke = ds["kinetic_energy_projectile"].values
         out.update(residual_speed=float(np.linalg.norm(v)),
                    max_tilt=float(ds["tilt"].max()),
@@ -236,6 +259,7 @@ def metrics_of(result) -> dict[str, Any]:
                    final_angular_velocity=[float(c) for c in ds["angular_velocity"][-1].values],
                    energy_absorbed=float(ke[0] - ke[-1]))
     else:
+        out["perforated"] = -1
         out.update(residual_speed=math.nan, max_tilt=math.nan, max_yaw=math.nan,
                    final_angular_velocity=[math.nan] * 3, energy_absorbed=math.nan)
     return out

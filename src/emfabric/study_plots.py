@@ -112,3 +112,43 @@ def design_figure(res: dict[str, Any], path: str | Path) -> Path:
     ax.legend(fontsize=8)
     stem = path.with_suffix("")
     return save_figure(fig, stem)[0]
+
+
+def ballistic_figure(res: dict[str, Any], path: str | Path) -> Path:
+    """Residual against striking speed with the Lambert–Jonas fit; with seeds, the perforation
+    probability with the logistic fit beside it."""
+    from emfabric.ballistic import lambert_jonas
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    seeded = "v50" in res
+    fig = new_figure((10.0 if seeded else 6.0, 4.0))
+    ax = fig.add_subplot(1, 2 if seeded else 1, 1)
+    det = [s for s in res["shots"] if s["seed"] is None and s["perforated"] in (0, 1)]
+    vs = np.array([s["speed"] for s in det])
+    vr = np.array([s["residual_speed"] if s["perforated"] == 1 else 0.0 for s in det])
+    ax.plot(vs, vr, "o", label="runs (0: stopped)")
+    lj = res["lambert_jonas"]
+    grid = np.linspace(0.0, max(vs.max(), 1.0) * 1.05, 300)
+    ax.plot(grid, lambert_jonas(grid, lj["a"], lj["p"], lj["v_bl"]), "-",
+            label=f"Lambert–Jonas: a = {lj['a']:.3g}, p = {lj['p']:.3g}, "
+                  f"V_BL = {lj['v_bl']:.4g} m/s")
+    ax.axvline(res["v_bl"], color="0.5", ls="--", label=f"bisection: {res['v_bl']:.4g} m/s")
+    ax.set_xlabel("striking speed [m/s]")
+    ax.set_ylabel("residual speed [m/s]")
+    ax.legend(fontsize=7)
+    if seeded:
+        ax2 = fig.add_subplot(1, 2, 2)
+        sh = [s for s in res["shots"] if s["seed"] is not None and s["perforated"] in (0, 1)]
+        v = np.array([s["speed"] for s in sh])
+        y = np.array([s["perforated"] for s in sh])
+        ax2.plot(v, y + np.linspace(-0.03, 0.03, y.size), "o", alpha=0.5, label="shots")
+        fit = res["v50"]
+        g = np.linspace(v.min(), v.max(), 300)
+        ax2.plot(g, 1.0 / (1.0 + np.exp(-(g - fit["v50"]) / fit["scale"])), "-",
+                 label=f"logistic: V50 = {fit['v50']:.4g} m/s, 95 % "
+                       f"[{fit['ci95'][0]:.4g}, {fit['ci95'][1]:.4g}]")
+        ax2.set_xlabel("striking speed [m/s]")
+        ax2.set_ylabel("perforation")
+        ax2.legend(fontsize=7)
+    return save_figure(fig, path.with_suffix(""))[0]

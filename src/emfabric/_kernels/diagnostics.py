@@ -25,8 +25,9 @@ COUNT = 16
 
 @njit(cache=True)
 def _yarn_stats(x, a0, count, step, s0, alpha, coef, rest2, il2, mat, stats):
-    """Max U², strain energy, broken count and min α of `count` consecutive segments s0 + k
-    joining a0 + k and a0 + k + step, merged into stats."""
+    """Max U² of the yarns not broken (α ≥ broken_below: a broken yarn carries no load, and
+    its ends fly apart), strain energy, broken count and min α of `count` consecutive segments
+    s0 + k joining a0 + k and a0 + k + step, merged into stats."""
     xx, xy, xz = x[0], x[1], x[2]
     broken_below = mat.broken_below
     u2max, strain, broken, amin = stats
@@ -35,8 +36,9 @@ def _yarn_stats(x, a0, count, step, s0, alpha, coef, rest2, il2, mat, stats):
         b = a + step
         s = s0 + k
         u2 = stretch_sq(xx[b] - xx[a], xy[b] - xy[a], xz[b] - xz[a], il2)
-        u2max = max(u2max, u2)
         al = alpha[s]
+        if al >= broken_below:
+            u2max = max(u2max, u2)
         strain += al * coef[s] * rest2 * strain_energy_density(u2, mat)
         broken += 1.0 if al < broken_below else 0.0
         amin = min(amin, al)

@@ -1,0 +1,263 @@
+"""Ballistic limit: V_BL of the model by bisection on the striking speed, the Lambert–Jonas fit
+of the residual speeds above it, and V50 with its spread from seeded shots
+(``emfabric ballistic-limit``).
+
+A shot perforates when its run ends by perforation (the projectile past every node, moving
+away), or reaches `end_time` moving forward past the sheet's plane and clear of the fabric
+(study.metrics_of); a shot still in contact at end_time has not perforated *within end_time*:
+V_BL is the lowest speed that perforates within the scenario's end_time (the shipped
+``rupture`` scenario runs 3 ms, long enough for a stopped sphere to rebound).
+
+Lambert–Jonas: v_r = a (v_s^p − V_BL^p)^{1/p} for v_s > V_BL, 0 below (SciPy least squares).
+V50: the logistic P(perforation | v) = 1 / (1 + exp(−(v − V50)/s)) fitted by maximum
+likelihood to the seeded shots (each seed draws the yarn moduli and jitters the impact point
+within one node spacing), with a bootstrap confidence interval over the shots.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from emfabric.scenario import Scenario
+
+SPEEDS_ABOVE = (1.05, 1.1, 1.2, 1.35, 1.5, 1.75, 2.0)
+"""Striking speeds above V_BL run for the Lambert–Jonas fit, as multiples of V_BL."""
+SEED_SPEEDS = tuple(np.linspace(0.8, 1.2, 9))
+"""Striking speeds of each seed's shots, as multiples of V_BL."""
+
+
+def lambert_jonas(vs: np.ndarray, a: float, p: float, vbl: float) -> np.ndarray:
+    """v_r = a (v_s^p − V_BL^p)^{1/p} above V_BL, 0 below."""
+    vs = np.asarray(vs, dtype=float)
+    inner = np.clip(vs**p - vbl**p, 0.0, None)
+    return a * inner ** (1.0 / p)
+
+
+def fit_lambert_jonas(vs, vr, vbl_guess: float) -> dict[str, float]:
+    """Least-squares (a, p, V_BL) of the Lambert–Jonas curve through perforating shots
+    (v_s, v_r); V_BL below every v_s given."""
+    from scipy.optimize import curve_fit
+
+    vs = np.asarray(vs, dtype=float)
+    vr = np.asarray(vr, dtype=float)
+    if vs.size < 3:
+        raise ValueError(f"the Lambert–Jonas fit needs 3 perforating shots, got {vs.size}")
+    top = float(vs.min()) * (1 - 1e-9)
+    guess = (0.9, 2.0, min(vbl_guess, 0.99 * top))
+    params, _cov = curve_fit(lambert_jonas, vs, vr, p0=guess,
+                             bounds=([1e-6, 1.0, 0.0], [2.0, 20.0, top]), maxfev=20000)
+    a, p, vbl = (float(x) for x in params)
+    rms = float(np.sqrt(np.mean((lambert_jonas(vs, a, p, vbl) - vr) ** 2)))
+    return {"a": a, "p": p, "v_bl": vbl, "rms_residual": rms}
+
+
+def fit_v50(speeds, perforated, bootstrap: int = 500, seed: int = 0) -> dict[str, float]:
+    """Maximum-likelihood logistic fit of P(perforation | v): V50, the scale s (spread σ =
+    sπ/√3) and a bootstrap 95 % interval of V50 (resampling the shots)."""
+    from scipy.optimize import minimize
+
+    v = np.asarray(speeds, dtype=float)
+    y = np.asarray(perforated, dtype=float)
+    if not (0 < y.sum() < y.size):
+        raise ValueError("V50 needs shots that perforate and shots that do not")
+
+    def nll(theta, v, y):
+        v50, log_s = theta
+        z = (v - v50) / math.exp(log_s)
+        # log(1 + e^{-z}) and log(1 + e^{z}), stable
+        return float(np.sum(y * np.logaddexp(0.0, -z) + (1 - y) * np.logaddexp(0.0, z)))
+
+    def fit(v, y):
+        start = (float(np.median(v)), math.log(max(float(np.std(v)), 1e-6 * float(v.mean()))))
+        res = minimize(nll, start, args=(v, y), method="Nelder-Mead",
+                       options={"xatol": 1e-8, "fatol": 1e-10, "maxiter": 4000})
+        return float(res.x[0]), math.exp(float(res.x[1]))
+
+    v50, s = fit(v, y)
+    rng = np.random.default_rng(seed)
+    boot = []
+    for _ in range(bootstrap):
+        idx = rng.integers(0, v.size, v.size)
+        if 0 < y[idx].sum() < v.size:
+            boot.append(fit(v[idx], y[idx])[0])
+    lo, hi = (np.percentile(boot, [2.5, 97.5]) if boot else (math.nan, math.nan))
+    return {"v50": v50, "scale": s, "sigma": s * math.pi / math.sqrt(3.0),
+            "ci95": [float(lo), float(hi)], "shots": int(v.size)}
+
+
+def shot(scenario: Scenario, speed: float, seed: int | None = None,
+         jitter: tuple[float, float] = (0.0, 0.0)) -> Scenario:
+    """The scenario at the striking speed (along its velocity), with a modulus seed and the
+    impact point moved by `jitter` in the sheet's plane."""
+    from emfabric.builder import build_model
+
+    v = np.asarray(scenario.projectile.velocity, dtype=float)
+    over: dict[str, Any] = {"projectile.velocity": list(speed * v / np.linalg.norm(v))}
+    if seed is not None:
+        over["fabric.material.seed"] = int(seed)
+    if jitter != (0.0, 0.0):
+        x0 = build_model(scenario).body_x0
+        over["projectile.position"] = [float(x0[0] + jitter[0]), float(x0[1] + jitter[1]),
+                                       float(x0[2])]
+    return scenario.replace(**over)
+
+
+def ballistic_limit(scenario: Scenario, out, *, seeds: int = 0, tolerance: float = 2.0,
+                    workers: int | None = None, scheduler: str | None = None,
+                    threads: int | None = None, max_rounds: int = 12,
+                    progress=None) -> dict[str, Any]:
+    """V_BL (bracket and bisect to `tolerance` m/s), the Lambert–Jonas fit above it, and with
+    `seeds`, V50. Every shot is a stored case in out/cases (a rerun reuses them)."""
+    from emfabric.study import Case, StudyError, case_key, connect, read_case, run_cases
+
+    out = Path(out)
+    v = np.asarray(scenario.projectile.velocity, dtype=float)
+    v0 = float(np.linalg.norm(v))
+    if scenario.projectile.shape == "none" or not v0 > 0.0:
+        raise StudyError("the ballistic limit needs a projectile with a striking velocity")
+    if not tolerance > 0.0:
+        raise StudyError(f"--tolerance {tolerance}: allowed: a positive speed [m/s]")
+    shots: list[dict[str, Any]] = []
+    client = cluster = None
+    per_case = 1
+
+    def fire(scenarios: list[tuple[float, int | None, Scenario]]) -> list[dict[str, Any]]:
+        nonlocal client, cluster, per_case
+        cases = []
+        for k, (_speed, _seed, sc) in enumerate(scenarios):
+            text = sc.to_toml()
+            cases.append(Case((k,), {}, sc, case_key(text), text))
+        todo = [c for c in cases if read_case(out, c) is None]
+        if todo:
+            if client is None:
+                client, cluster, per_case = connect(workers, scheduler, threads)
+            list(run_cases(todo, out, client, per_case, False))
+        got = []
+        for (speed, seed, _sc), case in zip(scenarios, cases, strict=True):
+            rec = read_case(out, case) or {"status": "failed", "perforated": -1}
+            perforated = int(rec.get("perforated", -1))
+            if perforated == -1 and rec.get("status") in ("complete", "partial"):
+                perforated = 0  # still in contact at end_time: not through within it
+            row = {"speed": speed, "seed": seed, "perforated": perforated,
+                   "residual_speed": float(rec.get("residual_speed", math.nan)),
+                   "status": rec.get("status", "failed"), "key": case.key}
+            got.append(row)
+            if all(r["key"] != case.key for r in shots):
+                shots.append(row)
+        if progress is not None:
+            progress(len(shots))
+        return got
+
+    width = 2 if workers is None else max(2, workers)
+    try:
+        # bracket: perforating and stopped shots of the deterministic model
+        fire([(s, None, shot(scenario, s)) for s in
+              (v0 * 2.0 ** (k - width // 2) for k in range(width))])
+        lo = hi = None
+        for _ in range(max_rounds):
+            perf = sorted(r["speed"] for r in shots if r["seed"] is None and r["perforated"] == 1)
+            held = sorted(r["speed"] for r in shots if r["seed"] is None and r["perforated"] == 0)
+            if perf and any(h < perf[0] for h in held):
+                hi = perf[0]
+                lo = max(h for h in held if h < hi)
+                break
+            if perf:  # below every speed tried (undecided shots decide nothing)
+                low = min(r["speed"] for r in shots if r["seed"] is None)
+                new = [low / 2.0 ** (k + 1) for k in range(width)]
+            elif held:
+                new = [max(held) * 2.0 ** (k + 1) for k in range(width)]
+            else:
+                raise StudyError("no shot was decided (perforated or stopped): " + "; ".join(
+                    f"{r['speed']:.4g} m/s {r['status']}" for r in shots)
+                    + "; a longer solver.end_time lets a run end by perforation or rebound")
+            fire([(s, None, shot(scenario, s)) for s in new])
+        if hi is None:
+            undecided = sum(1 for r in shots if r["perforated"] == -1)
+            raise StudyError(f"no bracket of the ballistic limit between "
+                             f"{min(r['speed'] for r in shots):.4g} and "
+                             f"{max(r['speed'] for r in shots):.4g} m/s"
+                             + (f" ({undecided} shots were still in contact at end_time or "
+                                f"did not complete: a longer solver.end_time decides them)"
+                                if undecided else ""))
+        rounds = 0
+        while hi - lo > tolerance and rounds < 4 * max_rounds:
+            new = [lo + (hi - lo) * (i + 1) / (width + 1) for i in range(width)]
+            before = (lo, hi)
+            for r in fire([(s, None, shot(scenario, s)) for s in new]):
+                if r["perforated"] == 1:
+                    hi = min(hi, r["speed"])
+            lo = max([lo] + [r["speed"] for r in shots if r["seed"] is None
+                             and r["perforated"] == 0 and r["speed"] < hi])
+            rounds += 1
+            if (lo, hi) == before:  # the shots inside decided nothing (failed runs)
+                break
+        v_bl = 0.5 * (lo + hi)
+        above = fire([(f * v_bl, None, shot(scenario, f * v_bl)) for f in SPEEDS_ABOVE])
+        pts = [(r["speed"], r["residual_speed"]) for r in shots
+               if r["seed"] is None and r["perforated"] == 1 and r["speed"] >= hi
+               and math.isfinite(r["residual_speed"])]
+        del above
+        lj = fit_lambert_jonas([p[0] for p in pts], [p[1] for p in pts], v_bl)
+        result: dict[str, Any] = {"v_bl": v_bl, "v_bl_bracket": [lo, hi],
+                                  "tolerance": tolerance, "lambert_jonas": lj}
+        if seeds > 0:
+            spacing = _node_spacing(scenario)
+            batch = []
+            for sd in range(1, seeds + 1):
+                rng = np.random.default_rng(sd)
+                jit = tuple(float(x) for x in rng.uniform(-0.5, 0.5, 2) * spacing)
+                for f in SEED_SPEEDS:
+                    batch.append((f * v_bl, sd, shot(scenario, f * v_bl, sd, jit)))
+            rows = [r for r in fire(batch) if r["perforated"] in (0, 1)]
+            result["v50"] = fit_v50([r["speed"] for r in rows], [r["perforated"] for r in rows])
+            result["seeds"] = seeds
+    finally:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+    result["shots"] = shots
+    result["runs"] = len(shots)
+    return result
+
+
+def _node_spacing(scenario: Scenario) -> np.ndarray:
+    fab = scenario.fabric
+    return np.array([fab.size[0] / (fab.nodes[0] - 1), fab.size[1] / (fab.nodes[1] - 1)])
+
+
+def write_outputs(res: dict[str, Any], out: Path) -> list[Path]:
+    """ballistic.json, ballistic.nc (the shots) and ballistic.png."""
+    import json
+
+    import xarray as xr
+
+    from emfabric import __version__
+    from emfabric.io.atomic import write_atomic
+    from emfabric.io.netcdf import write_netcdf
+
+    out.mkdir(parents=True, exist_ok=True)
+    text = json.dumps(res, indent=1)
+    write_atomic(out / "ballistic.json", lambda tmp: tmp.write_text(text, encoding="utf-8"))
+    shots = res["shots"]
+    ds = xr.Dataset({
+        "striking_speed": ("shot", np.array([s["speed"] for s in shots]), {"units": "m s-1"}),
+        "residual_speed": ("shot", np.array([s["residual_speed"] for s in shots]),
+                           {"units": "m s-1"}),
+        "perforated": ("shot", np.array([s["perforated"] for s in shots], dtype=np.int8),
+                       {"long_name": "1 perforated, 0 stopped, -1 failed"}),
+        "seed": ("shot", np.array([-1 if s["seed"] is None else s["seed"] for s in shots]),
+                 {"long_name": "modulus seed and impact jitter (-1: the scenario as given)"}),
+        "status": ("shot", np.array([str(s["status"]) for s in shots])),
+    }, attrs={"title": "emfabric ballistic limit", "emfabric_version": __version__,
+              "v_bl": res["v_bl"], "lambert_jonas": json.dumps(res["lambert_jonas"]),
+              "v50": json.dumps(res.get("v50"))})
+    write_netcdf(ds, out / "ballistic.nc")
+    from emfabric.study_plots import ballistic_figure
+
+    return [out / "ballistic.json", out / "ballistic.nc", ballistic_figure(res, out /
+                                                                           "ballistic.png")]
