@@ -39,7 +39,7 @@ def lambert_jonas(vs: np.ndarray, a: float, p: float, vbl: float) -> np.ndarray:
 
 def fit_lambert_jonas(vs, vr, vbl_guess: float) -> dict[str, float]:
     """Least-squares (a, p, V_BL) of the Lambert–Jonas curve through perforating shots
-    (v_s, v_r); V_BL below every v_s given."""
+    (v_s, v_r): 0 < a ≤ 1 and p ≥ 1 (so that v_r ≤ v_s), V_BL below every v_s given."""
     from scipy.optimize import curve_fit
 
     vs = np.asarray(vs, dtype=float)
@@ -47,9 +47,9 @@ def fit_lambert_jonas(vs, vr, vbl_guess: float) -> dict[str, float]:
     if vs.size < 3:
         raise ValueError(f"the Lambert–Jonas fit needs 3 perforating shots, got {vs.size}")
     top = float(vs.min()) * (1 - 1e-9)
-    guess = (0.9, 2.0, min(vbl_guess, 0.99 * top))
+    guess = (0.9, 2.0, min(vbl_guess, 0.99 * top))  # inside the bounds
     params, _cov = curve_fit(lambert_jonas, vs, vr, p0=guess,
-                             bounds=([1e-6, 1.0, 0.0], [2.0, 20.0, top]), maxfev=20000)
+                             bounds=([1e-6, 1.0, 0.0], [1.0, 20.0, top]), maxfev=20000)
     a, p, vbl = (float(x) for x in params)
     rms = float(np.sqrt(np.mean((lambert_jonas(vs, a, p, vbl) - vr) ** 2)))
     return {"a": a, "p": p, "v_bl": vbl, "rms_residual": rms}

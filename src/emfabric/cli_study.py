@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import signal
 import time
 from pathlib import Path
 from typing import Annotated
@@ -20,6 +21,16 @@ SchedulerOpt = Annotated[str | None, typer.Option(
 ThreadsOpt = Annotated[int | None, typer.Option(
     "--threads", help="Numba threads per case (default: cores / workers locally, 1 on a "
                       "scheduler)")]
+
+
+def _stop_on_signals() -> None:
+    """SIGTERM and SIGHUP (a job scheduler's stop, a closed terminal) stop a study like Ctrl-C:
+    the finished cases are on disk already, the local cluster is shut down."""
+    from emfabric.runner import interrupt
+
+    for name in ("SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            signal.signal(getattr(signal, name), interrupt)
 
 
 def _progress(quiet: bool) -> Progress:
@@ -53,6 +64,7 @@ def sweep(
     except StudyError as err:
         error(str(err))
         raise typer.Exit(2) from None
+    _stop_on_signals()
     bar = _progress(quiet)
     t0 = time.perf_counter()
     reused = sum(read_case(out, c) is not None for c in plan.cases)
@@ -139,6 +151,7 @@ def design_field(
     from emfabric.study import StudyError
 
     sc = _scenario(scenario, set_)
+    _stop_on_signals()
     if not 0.0 < tolerance < 1.0:
         error(f"--tolerance {tolerance}: allowed: between 0 and 1")
         raise typer.Exit(2)
@@ -186,6 +199,7 @@ def ballistic_limit(
     from emfabric.study import StudyError
 
     sc = _scenario(scenario, set_)
+    _stop_on_signals()
     if seeds < 0:
         error(f"--seeds {seeds}: allowed: 0 or more")
         raise typer.Exit(2)
