@@ -94,11 +94,13 @@ def test_recorder_computes_no_physics():
 
 
 def test_optional_dependencies_stay_optional():
-    """magpylib (the "magnets" extra) and SciPy (which it brings) are imported only inside the
-    functions that compute a magnet's field: the tests' environment has them, a user's without
-    the extra must not need them (an undeclared SciPy once broke every new install)."""
-    allowed = {("emfabric.source_grid", "magnet_fields"), ("emfabric.source_grid",
-                                                          "import_magpylib")}
+    """magpylib (the "magnets" extra), Dask and SciPy (the "studies" extra) are imported only
+    inside the functions that need them: the tests' environment has them, a user's without the
+    extras must not (an undeclared SciPy once broke every new install)."""
+    allowed = {("emfabric.source_grid", "magnet_fields"),
+               ("emfabric.source_grid", "import_magpylib"),
+               ("emfabric.ballistic", "fit_lambert_jonas"), ("emfabric.ballistic", "fit_v50"),
+               ("emfabric.study", "connect"), ("emfabric.study", "run_cases")}
     for path in SRC.rglob("*.py"):
         tree = ast.parse(path.read_text(encoding="utf-8"))
         owner = {}
@@ -113,6 +115,6 @@ def test_optional_dependencies_stay_optional():
             elif isinstance(node, ast.ImportFrom) and node.module:
                 names = [node.module]
             for name in names:
-                if name.split(".")[0] in ("scipy", "magpylib"):
+                if name.split(".")[0] in ("scipy", "magpylib", "dask", "distributed"):
                     where = (_module(path), owner.get(node))
                     assert where in allowed, f"{path.name} imports {name} in {where[1]}"

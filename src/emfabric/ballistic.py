@@ -259,5 +259,5 @@ def write_outputs(res: dict[str, Any], out: Path) -> list[Path]:
     write_netcdf(ds, out / "ballistic.nc")
     from emfabric.study_plots import ballistic_figure
 
-    return [out / "ballistic.json", out / "ballistic.nc", ballistic_figure(res, out /
-                                                                           "ballistic.png")]
+    figure = ballistic_figure(res, out / "ballistic.png", lambert_jonas)
+    return [out / "ballistic.json", out / "ballistic.nc", figure]

@@ -206,6 +206,10 @@ def ballistic_limit(
     try:
         res = search(sc, out, seeds=seeds, tolerance=tolerance, workers=workers,
                      scheduler=scheduler, threads=threads)
+    except ImportError as err:
+        error(f"the ballistic limit needs the studies extra: pip install 'emfabric[studies]' "
+              f"({err})")
+        raise typer.Exit(2) from None
     except (StudyError, ValueError, RuntimeError) as err:
         error(str(err))
         raise typer.Exit(2) from None

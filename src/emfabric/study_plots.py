@@ -114,11 +114,10 @@ def design_figure(res: dict[str, Any], path: str | Path) -> Path:
     return save_figure(fig, stem)[0]
 
 
-def ballistic_figure(res: dict[str, Any], path: str | Path) -> Path:
-    """Residual against striking speed with the Lambert–Jonas fit; with seeds, the perforation
-    probability with the logistic fit beside it."""
-    from emfabric.ballistic import lambert_jonas
-
+def ballistic_figure(res: dict[str, Any], path: str | Path, lambert_jonas) -> Path:
+    """Residual against striking speed with the Lambert–Jonas fit (the curve function given:
+    emfabric.ballistic.lambert_jonas); with seeds, the perforation probability with the
+    logistic fit beside it."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     seeded = "v50" in res
