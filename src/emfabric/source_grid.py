@@ -22,12 +22,11 @@ evaluation in the kernels: its field is zero outside the box and interpolated in
 from __future__ import annotations
 
 import logging
-import math
 
 import numpy as np
 from numba import njit, prange
 
-from emfabric._kernels.coils import loop_unit_field
+from emfabric._kernels.coils import loop_vectors
 from emfabric._kernels.records import Field
 
 log = logging.getLogger(__name__)
@@ -36,11 +35,24 @@ MAGNET_WAVE = -1
 """grid_wave of the magnets' group: constant 1, no induced E."""
 
 
+@njit(cache=True)
+def _point_values(loops, group_of, x, out):
+    """out (groups, 6) = each group's b and a at the point x, summed over its loops in their
+    order. A call of its own: inlined into the parallel loop below, Numba's array analysis
+    failed on the tuples."""
+    out[:, :] = 0.0
+    for m in range(loops.shape[0]):
+        bu, au = loop_vectors(loops[m], x)
+        o = out[group_of[m]]
+        for c in range(3):
+            o[c] += bu[c]
+            o[3 + c] += au[c]
+
+
 @njit(cache=True, parallel=True)
 def _loop_values(loops, group_of, origin, step, shape, offset, out):
-    """Each group's b [T/A-unit] and a [T m] at the points origin + (index + offset)·step
-    (offset a 3-vector),
-    out (groups, *shape, 6), summed over the group's loops in their order."""
+    """Each group's b [T per unit waveform] and a [T m] at the points origin + (index +
+    offset)·step (offset a 3-vector): out (groups, *shape, 6)."""
     nx, ny, nz = shape[0], shape[1], shape[2]
     for i in prange(nx):
         px = origin[0] + (i + offset[0]) * step[0]
@@ -48,29 +60,7 @@ def _loop_values(loops, group_of, origin, step, shape, offset, out):
             py = origin[1] + (j + offset[1]) * step[1]
             for k in range(nz):
                 pz = origin[2] + (k + offset[2]) * step[2]
-                for g in range(out.shape[0]):
-                    for c in range(6):
-                        out[g, i, j, k, c] = 0.0
-                for m in range(loops.shape[0]):
-                    lp = loops[m]
-                    g = group_of[m]
-                    dx, dy, dz = px - lp[0], py - lp[1], pz - lp[2]
-                    nx_, ny_, nz_ = lp[3], lp[4], lp[5]
-                    z = dx * nx_ + dy * ny_ + dz * nz_
-                    rx, ry, rz = dx - z * nx_, dy - z * ny_, dz - z * nz_
-                    rho = math.sqrt(rx * rx + ry * ry + rz * rz)
-                    b_rho, b_ax, a_phi = loop_unit_field(lp[6], lp[7], rho, z)
-                    if rho > 0.0:
-                        ux, uy, uz = rx / rho, ry / rho, rz / rho
-                    else:
-                        ux, uy, uz = 0.0, 0.0, 0.0
-                    o = out[g, i, j, k]
-                    o[0] += b_rho * ux + b_ax * nx_
-                    o[1] += b_rho * uy + b_ax * ny_
-                    o[2] += b_rho * uz + b_ax * nz_
-                    o[3] += a_phi * (ny_ * uz - nz_ * uy)
-                    o[4] += a_phi * (nz_ * ux - nx_ * uz)
-                    o[5] += a_phi * (nx_ * uy - ny_ * ux)
+                _point_values(loops, group_of, (px, py, pz), out[:, i, j, k])
 
 
 EDGES = ((0.5, 0.0, 0.0), (0.0, 0.5, 0.0), (0.0, 0.0, 0.5))

@@ -136,3 +136,23 @@ def current_at(wave, table, count, t):
             slope = (table[i, 1] - table[i - 1, 1]) / (table[i, 0] - table[i - 1, 0])
             return amp * (table[i - 1, 1] + slope * (t - table[i - 1, 0])), amp * slope
     return amp * table[count - 1, 1], 0.0
+
+
+@njit(cache=True, inline="always")
+def loop_vectors(lp, x):
+    """B [T] and vector potential A [T m] per ampere of the loop lp (a Field.loops row: centre,
+    unit normal, radius, wire radius) at the point x, as Cartesian 3-tuples: B = B_ρ ρ̂ + B_z n,
+    A = A_φ φ̂ with φ̂ = n × ρ̂ (zero on the axis)."""
+    dx, dy, dz = x[0] - lp[0], x[1] - lp[1], x[2] - lp[2]
+    nx, ny, nz = lp[3], lp[4], lp[5]
+    z = dx * nx + dy * ny + dz * nz
+    rx, ry, rz = dx - z * nx, dy - z * ny, dz - z * nz
+    rho = math.sqrt(rx * rx + ry * ry + rz * rz)
+    b_rho, b_ax, a_phi = loop_unit_field(lp[6], lp[7], rho, z)
+    if rho > 0.0:
+        ux, uy, uz = rx / rho, ry / rho, rz / rho
+    else:
+        ux, uy, uz = 0.0, 0.0, 0.0
+    return ((b_rho * ux + b_ax * nx, b_rho * uy + b_ax * ny, b_rho * uz + b_ax * nz),
+            (a_phi * (ny * uz - nz * uy), a_phi * (nz * ux - nx * uz),
+             a_phi * (nx * uy - ny * ux)))

@@ -7,6 +7,7 @@ Every kernel that needs the field at a point (node update, body wrench, energy b
 calls field_at; a new field source is a new branch here and a new scenario entry.
 """
 
+
 import math
 
 import numpy as np
@@ -175,6 +176,12 @@ def fill_fields(grid, fld, x, v, dt, t, out):
     """out (6, N) = E, B at the points x + Δt v (3, N) and time t: field_at at each point,
     with the record's arrays taken out once (compiled by the type of `grid`, as
     loop_fields)."""
+    _fill_plain(fld, x, v, dt, t, out)
+
+
+@njit(cache=True)
+def _fill_plain(fld, x, v, dt, t, out):
+    """fill_fields point by point through field_at_waves (no source grid)."""
     cur, rate = group_waves(fld, t)
     for n in range(x.shape[1]):
         e, b = field_at_waves(fld, (x[0, n] + dt * v[0, n], x[1, n] + dt * v[1, n],
@@ -188,13 +195,7 @@ def fill_fields(grid, fld, x, v, dt, t, out):
 def _fill_fields_typed(grid, fld, x, v, dt, t, out):
     if isinstance(grid, types.NoneType):
         def plain(grid, fld, x, v, dt, t, out):
-            cur, rate = group_waves(fld, t)
-            for n in range(x.shape[1]):
-                e, b = field_at_waves(fld, (x[0, n] + dt * v[0, n], x[1, n] + dt * v[1, n],
-                                            x[2, n] + dt * v[2, n]), t, cur, rate)
-                for c in range(3):
-                    out[c, n] = e[c]
-                    out[3 + c, n] = b[c]
+            _fill_plain(fld, x, v, dt, t, out)
         return plain
 
     def hoisted(grid, fld, x, v, dt, t, out):
@@ -327,6 +328,8 @@ def _sum_loops(loops, currents, tables, table_len, x, t, e, b):
         current, rate = current_at(currents[k], tables[k], table_len[k], t)
         if current == 0.0 and rate == 0.0:
             continue
+        # loop_vectors' geometry, written out: the E of a compiled caller of loop_vectors
+        # differed by an ulp between the node pass and field_at (tests compare them bit for bit)
         lp = loops[k]
         dx, dy, dz = x[0] - lp[0], x[1] - lp[1], x[2] - lp[2]
         nx, ny, nz = lp[3], lp[4], lp[5]
