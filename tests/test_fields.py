@@ -588,3 +588,27 @@ def test_magnet_without_magpylib_is_a_clear_error(monkeypatch):
 def test_magnet_dimension_is_checked():
     with pytest.raises(ScenarioError, match=r"dimension = \[0\.01, 0\.01\].*\[a, b, c\]"):
         make(**{"field.sources": [_magnet("cuboid", (0, 0, 1), (0.01, 0.01))]})
+
+
+def test_history_records_the_field_at_the_projectile():
+    """field_B / field_E (time, xyz): the applied field at the projectile's centre at each
+    record — a ramped loop's B grows as the ramp, and its induced E is there while it ramps."""
+    import xarray as xr
+
+    src = {"kind": "loop", "centre": [0.0, 0.0, -0.05], "normal": [1.0, 0.0, 0.0],
+           "radius": 0.2, "current": 1.6e4, "waveform": "ramp", "rise_time": 2e-5}
+    res = run(make(**{"fabric.nodes": [9, 9], "solver.end_time": 3e-5, "field.sources": [src],
+                      "output.snapshot_interval": 1e-5}))
+    ds = res.history
+    assert ds["field_B"].attrs["units"] == "T" and ds["field_B"].dims == ("time", "xyz")
+    pos = ds["projectile_position"].values
+    t = ds["time"].values
+    for k in (0, len(t) // 2, len(t) - 1):
+        e, b = fields_at(res.model.field, pos[k:k + 1], float(t[k]))
+        assert np.array_equal(ds["field_B"].values[k], b[0])
+        assert np.array_equal(ds["field_E"].values[k], e[0])
+    bx = ds["field_B"].sel(xyz="x").values
+    assert bx[0] == 0.0 and bx[-1] > 0.04
+    ramping = (t > 1e-6) & (t < 1.9e-5)
+    assert np.all(np.linalg.norm(ds["field_E"].values[ramping], axis=1) > 0.0)
+    assert isinstance(ds, xr.Dataset)

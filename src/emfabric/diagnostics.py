@@ -13,6 +13,7 @@ from typing import NamedTuple
 import numpy as np
 
 from emfabric._kernels import diagnostics as _k
+from emfabric.fields import fields_at
 from emfabric.model import Model, State
 
 # the history record: name -> (width, units, long name); width 3 means a (time, xyz) variable;
@@ -53,6 +54,9 @@ RECORD: dict[str, tuple[int, str, str]] = {
     "yaw": (1, "rad", "angle between the projectile's axis (nose marker) and its velocity"),
     "contact_force": (3, "N", "total contact + friction force on the projectile (mean over "
                               "the step)"),
+    "field_B": (3, "T", "magnetic field at the projectile's centre of mass (the sheet's centre "
+                        "without a projectile)"),
+    "field_E": (3, "V m-1", "electric field there (the induced E of a pulsed coil included)"),
 }
 COLUMNS = 1 + sum(w for w, _u, _l in RECORD.values())
 """Columns of a history record (time first)."""
@@ -94,6 +98,10 @@ def _record(model: Model, state: State, row: np.ndarray,
     e0 = _k.history_row(state.t, state.last_dt, state.iterations, state.error, state.rejected,
                         state.evaluations, state.contact_count, state.body, model.body, out,
                         state.energy, e_initial, state.contact_force, row)
+    # the applied field where the projectile is: when a pulse rises, how strong it got
+    e, b = fields_at(model.field, centre.reshape(1, 3), state.t)
+    row[LAYOUT["field_B"]] = b[0]
+    row[LAYOUT["field_E"]] = e[0]
     return FabricDiagnostics._make(out.tolist()), float(e0)
 
 

@@ -313,8 +313,29 @@ def spin_figure(histories: Sequence[xr.Dataset] | xr.Dataset,
             s = _Series(f"ω_{axis}", lambda ds, c=c: ds["angular_velocity"].values[:, c],
                         _AXIS_COLOURS[c])
             _panel(ax, histories, [s], colour_by="run", ylabel=f"$\\omega_{axis}$ [rad/s]")
+        _field_overlay(axes[0], histories)
         _finish(fig, axes, "tilt and spin of the projectile", histories, labels, "run")
     return fig
+
+
+def _field_overlay(ax, histories: Sequence[xr.Dataset]) -> None:
+    """|B| at the projectile on a second axis of the tilt panel, when the field changes in time
+    in some run (a pulsed coil: when it rose, against the tilt it gave)."""
+    series = []
+    for ds in histories:
+        if "field_B" not in ds:
+            continue
+        b = np.linalg.norm(ds["field_B"].values, axis=1)
+        if b.size and b.max() - b.min() > 1e-9 * max(b.max(), 1e-300):
+            series.append((ds, b))
+    if not series:
+        return
+    twin = ax.twinx()
+    for k, (ds, b) in enumerate(series):
+        twin.plot(_time_us(ds), b, ls="--", color="0.5", lw=1.0,
+                  label="|B| at the projectile" if k == 0 else None)
+    twin.set_ylabel("|B| [T] (dashed)", color="0.4")
+    twin.tick_params(axis="y", colors="0.4")
 
 
 def _dissipated(ds: xr.Dataset) -> np.ndarray:
