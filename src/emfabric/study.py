@@ -373,7 +373,10 @@ def sweep(plan: Plan, out: str | Path, *, workers: int | None = None,
     out = Path(out)
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
-    (out / "study.toml").write_text(_study_text(plan), encoding="utf-8")
+    from emfabric.io.atomic import write_atomic
+
+    text = _study_text(plan)  # the study as run, beside its results
+    write_atomic(out / "study.json", lambda tmp: tmp.write_text(text, encoding="utf-8"))
     todo = [c for c in plan.cases if read_case(out, c) is None]
     reused = len(plan.cases) - len(todo)
     if todo:
