@@ -170,6 +170,13 @@ def test_estimate_is_eq_5_4_with_the_node_charge():
     assert estimate(sc, 0.1, 2e-4).B == pytest.approx(est.B / 4, rel=1e-12)
     doubled = estimate(sc.replace(**{"fabric.charge_per_node": 1.0}), 0.1, 1e-4)
     assert doubled.B == pytest.approx(est.B / 2, rel=1e-12)
+    cli = subprocess.run([sys.executable, "-m", "emfabric", "estimate", "paper-field",
+                          "--set", "fabric.nodes=[41,41]", "--set", "fabric.rescale=false",
+                          "--set", "fabric.charge_per_node=0.5", "--target-tilt", "0.1",
+                          "--by", "1e-4"], capture_output=True, text=True)
+    assert cli.returncode == 0, cli.stderr
+    out = json.loads(cli.stdout)
+    assert out["B"] == out["estimate_eq54"] == pytest.approx(est.B, rel=1e-12)
 
 
 def test_scale_field_scales_every_source_linearly():

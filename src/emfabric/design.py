@@ -40,11 +40,11 @@ class Estimate:
     by: float
 
     def as_dict(self) -> dict[str, Any]:
-        return {"estimate_eq54": self.B, "moment_eq53": self.moment,
+        return {"B": self.B, "estimate_eq54": self.B, "moment_eq53": self.moment,
                 "inputs": {"I": self.inertia, "q": self.charge, "speed": self.speed,
                            "mu_s": self.static_friction, "N_c": self.nodes_in_contact,
                            "R": self.radius, "target_tilt": self.tilt, "by": self.by},
-                "units": {"estimate_eq54": "T", "moment_eq53": "N m", "I": "kg m2",
+                "units": {"B": "T", "estimate_eq54": "T", "moment_eq53": "N m", "I": "kg m2",
                           "q": "C", "speed": "m s-1", "R": "m", "target_tilt": "rad",
                           "by": "s"}}
 
