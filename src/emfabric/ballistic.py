@@ -135,7 +135,7 @@ def ballistic_limit(scenario: Scenario, out, *, seeds: int = 0, tolerance: float
         if todo:
             if client is None:
                 client, cluster, per_case = connect(workers, scheduler, threads)
-            list(run_cases(todo, out, client, per_case, False))
+            run_cases(todo, out, client, per_case, False)
         got = []
         for (speed, seed, _sc), case in zip(scenarios, cases, strict=True):
             rec = read_case(out, case) or {"status": "failed", "perforated": -1}
@@ -196,11 +196,10 @@ def ballistic_limit(scenario: Scenario, out, *, seeds: int = 0, tolerance: float
             if (lo, hi) == before:  # the shots inside decided nothing (failed runs)
                 break
         v_bl = 0.5 * (lo + hi)
-        above = fire([(f * v_bl, None, shot(scenario, f * v_bl)) for f in SPEEDS_ABOVE])
+        fire([(f * v_bl, None, shot(scenario, f * v_bl)) for f in SPEEDS_ABOVE])
         pts = [(r["speed"], r["residual_speed"]) for r in shots
                if r["seed"] is None and r["perforated"] == 1 and r["speed"] >= hi
                and math.isfinite(r["residual_speed"])]
-        del above
         lj = fit_lambert_jonas([p[0] for p in pts], [p[1] for p in pts], v_bl)
         result: dict[str, Any] = {"v_bl": v_bl, "v_bl_bracket": [lo, hi],
                                   "tolerance": tolerance, "lambert_jonas": lj}

@@ -100,10 +100,6 @@ def sweep(
                       "message) and cases/<key>.json[/]")
 
 
-def _scenario(name: str, overrides: list[str] | None):
-    return load_or_exit(name, overrides)
-
-
 SetOpt = Annotated[list[str] | None, typer.Option(
     "--set", help="Override a scenario value, e.g. --set fabric.nodes=[40,40] (repeatable)")]
 
@@ -119,7 +115,7 @@ def estimate(
     charge): JSON on stdout."""
     from emfabric.design import estimate as eq54
 
-    sc = _scenario(scenario, set_)
+    sc = load_or_exit(scenario, set_)
     try:
         est = eq54(sc, target_tilt, by)
     except ValueError as err:
@@ -150,7 +146,7 @@ def design_field(
     from emfabric.io.atomic import write_atomic
     from emfabric.study import StudyError
 
-    sc = _scenario(scenario, set_)
+    sc = load_or_exit(scenario, set_)
     _stop_on_signals()
     if not 0.0 < tolerance < 1.0:
         error(f"--tolerance {tolerance}: allowed: between 0 and 1")
@@ -198,7 +194,7 @@ def ballistic_limit(
     from emfabric.ballistic import write_outputs
     from emfabric.study import StudyError
 
-    sc = _scenario(scenario, set_)
+    sc = load_or_exit(scenario, set_)
     _stop_on_signals()
     if seeds < 0:
         error(f"--seeds {seeds}: allowed: 0 or more")

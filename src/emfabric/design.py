@@ -154,16 +154,16 @@ def design_field(scenario: Scenario, tilt: float, by: float, out, *,
         return Case((len(probes),), {"scale": s}, sc, case_key(text), text)
 
     client = cluster = None
+    per_case = 1
     try:
         def measure(scales: list[float]) -> None:
-            nonlocal client, cluster
+            nonlocal client, cluster, per_case
             cases = [case_for(s) for s in scales]
             todo = [c for c in cases if read_case(out, c) is None]
             if todo:
                 if client is None:
-                    client, cluster, per = connect(workers, scheduler, threads)
-                    measure.threads = per  # type: ignore[attr-defined]
-                list(run_cases(todo, out, client, measure.threads, False))  # type: ignore
+                    client, cluster, per_case = connect(workers, scheduler, threads)
+                run_cases(todo, out, client, per_case, False)
             for s, c in zip(scales, cases, strict=True):
                 rec = read_case(out, c) or {}
                 status = str(rec.get("status", "failed"))

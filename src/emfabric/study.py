@@ -34,7 +34,7 @@ import math
 import os
 import time
 import tomllib
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -339,11 +339,9 @@ def connect(workers: int | None, scheduler: str | None, threads: int | None
 
 
 def run_cases(cases: list[Case], out: Path, client, threads: int, keep: bool,
-              progress: Callable[[int, int], None] | None = None
-              ) -> Iterator[tuple[Case, dict[str, Any]]]:
-    """Submit the cases to the Dask client and yield (case, metrics) as they arrive, each
-    stored before it is yielded. A worker that dies mid-case: Dask runs the case again
-    (retries)."""
+              progress: Callable[[int, int], None] | None = None) -> None:
+    """Run the cases on the Dask client, storing each result (read_case) as it arrives. A
+    worker that dies mid-case: Dask runs the case again (retries)."""
     from dask.distributed import as_completed
 
     futures = {}
@@ -363,7 +361,6 @@ def run_cases(cases: list[Case], out: Path, client, threads: int, keep: bool,
         done += 1
         if progress is not None:
             progress(done, len(cases))
-        yield case, metrics
 
 
 def sweep(plan: Plan, out: str | Path, *, workers: int | None = None,
@@ -382,16 +379,12 @@ def sweep(plan: Plan, out: str | Path, *, workers: int | None = None,
     if todo:
         client, cluster, per_case = connect(workers, scheduler, threads)
         try:
-            for _case, _m in run_cases(todo, out, client, per_case, plan.study.keep_histories,
-                                       progress):
-                pass
+            run_cases(todo, out, client, per_case, plan.study.keep_histories, progress)
         finally:
             client.close()
             if cluster is not None:
                 cluster.close()
-    results = collect(plan, out)
-    failed = int(sum(1 for c in plan.cases
-                     if (read_case(out, c) or {}).get("status") in ("failed", "diverged")))
+    results, failed = collect(plan, out)
     return Outcome(len(plan.cases), len(todo), reused, failed, results,
                    time.perf_counter() - t0)
 
@@ -403,9 +396,9 @@ def _study_text(plan: Plan) -> str:
                        "keep_histories": plan.study.keep_histories}, indent=1)
 
 
-def collect(plan: Plan, out: Path) -> Path:
+def collect(plan: Plan, out: Path) -> tuple[Path, int]:
     """Assemble DIR/results.nc from the stored case results (a case not run yet: NaN,
-    status "missing")."""
+    status "missing"); return its path and the number of diverged or failed cases."""
     import xarray as xr
 
     from emfabric import __version__
@@ -465,13 +458,5 @@ def collect(plan: Plan, out: Path) -> Path:
                      "Conventions": "CF-1.10"})
     path = out / "results.nc"
     write_netcdf(ds, path)
-    return path
-
-
-def cases_of(out: Path) -> Iterable[dict[str, Any]]:
-    """The stored case records of a study folder."""
-    for p in sorted((out / "cases").glob("*.json")):
-        try:
-            yield json.loads(p.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            continue
+    failed = int(np.isin(data["status"].astype(str), ("failed", "diverged")).sum())
+    return path, failed

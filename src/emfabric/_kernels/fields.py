@@ -36,19 +36,6 @@ def field_at(fld, x, t):
     return source_fields(fld.grid_values, fld, x, t, eu, bu)
 
 
-@njit(cache=True, inline="always")
-def field_at_waves(fld, x, t, cur, rate):
-    """field_at with the source grid's group waveforms at t given (group_waves(fld, t)): for
-    the kernels that evaluate the field at many points of one time."""
-    w = 1.0 if (fld.region != REGION_HALF_SPACE or x[2] < fld.z0) else 0.0
-    e = fld.E
-    b = fld.B
-    eu = (w * e[0], w * e[1], w * e[2])
-    bu = (w * b[0], w * b[1], w * b[2])
-    eu, bu = map_fields(fld.map_axes, fld.map_size, fld.map_step, fld.map_values, x, eu, bu)
-    return grid_fields(fld.grid_values, fld, x, t, cur, rate, eu, bu)
-
-
 @njit(cache=True)
 def group_waves(fld, t):
     """Each grid group's waveform and its rate at t: (w, dw/dt), arrays (groups,)."""
@@ -66,7 +53,7 @@ def group_waves(fld, t):
 
 def source_fields(grid, fld, x, t, e, b):
     """e, b plus the loops' and magnets' fields at x, t: from the source grid if there is one
-    (grid_fields), else the loops exactly. Compiled by the type of `grid`, as loop_fields."""
+    (_grid_sum), else the loops exactly. Compiled by the type of `grid`, as loop_fields."""
     if grid is None:
         return loop_fields(fld.loops, fld.currents, fld.tables, fld.table_len, x, t, e, b)
     cur, rate = group_waves(fld, t)
@@ -82,25 +69,6 @@ def _source_fields_typed(grid, fld, x, t, e, b):
 
     def with_grid(grid, fld, x, t, e, b):
         cur, rate = group_waves(fld, t)
-        return _grid_sum(fld, x, t, cur, rate, e, b)
-    return with_grid
-
-
-def grid_fields(grid, fld, x, t, cur, rate, e, b):
-    """source_fields with the group waveforms given."""
-    if grid is None:
-        return loop_fields(fld.loops, fld.currents, fld.tables, fld.table_len, x, t, e, b)
-    return _grid_sum(fld, x, t, cur, rate, e, b)
-
-
-@overload(grid_fields, inline="always")
-def _grid_fields_typed(grid, fld, x, t, cur, rate, e, b):
-    if isinstance(grid, types.NoneType):
-        def no_grid(grid, fld, x, t, cur, rate, e, b):
-            return loop_fields(fld.loops, fld.currents, fld.tables, fld.table_len, x, t, e, b)
-        return no_grid
-
-    def with_grid(grid, fld, x, t, cur, rate, e, b):
         return _grid_sum(fld, x, t, cur, rate, e, b)
     return with_grid
 
@@ -181,11 +149,10 @@ def fill_fields(grid, fld, x, v, dt, t, out):
 
 @njit(cache=True)
 def _fill_plain(fld, x, v, dt, t, out):
-    """fill_fields point by point through field_at_waves (no source grid)."""
-    cur, rate = group_waves(fld, t)
+    """fill_fields point by point through field_at (no source grid)."""
     for n in range(x.shape[1]):
-        e, b = field_at_waves(fld, (x[0, n] + dt * v[0, n], x[1, n] + dt * v[1, n],
-                                    x[2, n] + dt * v[2, n]), t, cur, rate)
+        e, b = field_at(fld, (x[0, n] + dt * v[0, n], x[1, n] + dt * v[1, n],
+                              x[2, n] + dt * v[2, n]), t)
         for c in range(3):
             out[c, n] = e[c]
             out[3 + c, n] = b[c]
