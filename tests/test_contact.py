@@ -35,7 +35,8 @@ def _contact(x_node, v_node, centre=(0, 0, 0), vel=(0, 0, 0), omega=(0, 0, 0), m
     work = make_work(1, 1)
     work.cand[0] = 0
     work.err_rows[:] = 0.0
-    nc = node_contact(nodes, body, Contact(mu_s, mu_d), state, 1, x1, v1, work)
+    nc = node_contact(nodes, body, Contact(mu_s, mu_d), state, 1, x1, v1, work, 0.0, 0.0,
+                      False)
     f = np.zeros(3)
     m = np.zeros(3)
     _reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, f, m)
@@ -106,3 +107,51 @@ def test_spinning_surface_velocity():
     np.testing.assert_allclose(v, [-10.0, -9.5, 0.0], rtol=1e-13, atol=1e-12)
     # the body is braked in spin: moment about +z is negative
     assert m[2] < 0
+
+
+def test_sticking_node_lands_where_its_phi_update_puts_it():
+    """With the step's φ and Δt, a node that sticks to a spinning sphere ends where the φ-update
+    with its velocity after contact puts it, moved only along the surface normal:
+    x1 − (x_trial + φΔt (v1 − v_trial)) ∥ n (to O(Δt|ω|)). Its velocity is the surface point's there, and the
+    impulse recorded is m (v1 − v_trial). (Without the move along the velocity change the node
+    lags the surface by φΔt J_t/m every step: an O(Δt) error in the spin.)"""
+    m, phi, dt = 1e-6, 0.5, 1e-7
+    x_trial = np.array([0.003, -0.004, -0.019])
+    omega = np.array([0.0, 2000.0, 500.0])
+    vel = np.array([0.0, 0.0, 40.0])
+    # approaching the surface at 40 m/s, sliding along it at 5 m/s: μ_s = 1 holds it
+    n0 = x_trial / np.linalg.norm(x_trial)
+    tangent = np.cross(n0, [1.0, 0.0, 0.0])
+    tangent /= np.linalg.norm(tangent)
+    v_trial = vel + np.cross(omega, R * n0) - 40.0 * n0 + 5.0 * tangent
+    x1 = x_trial.reshape(3, 1).copy()
+    v1 = v_trial.reshape(3, 1).copy()
+    nodes = Nodes(1, 1, x1.copy(), np.array([m]), np.array([1 / m]), np.zeros(1))
+    body = Body(True, SHAPE_SPHERE, R, 1.0, np.eye(3), np.zeros((0, 3)), np.zeros(0),
+                np.zeros(3))
+    state = np.zeros((BODY_ROWS, 3))
+    state[BODY_V], state[BODY_W] = vel, omega
+    state[BODY_R0:BODY_R0 + 3] = np.eye(3)
+    work = make_work(1, 1)
+    work.cand[0] = 0
+    assert node_contact(nodes, body, Contact(1.0, 0.95), state, 1, x1, v1, work, phi, dt,
+                        False) == 1
+    x, v = x1[:, 0], v1[:, 0]
+    n = x / np.linalg.norm(x)
+    assert np.linalg.norm(x) == pytest.approx(R, rel=1e-14)
+    np.testing.assert_allclose(v, vel + np.cross(omega, x), rtol=1e-12)
+    np.testing.assert_allclose(work.c_imp[:, 0], m * (v - v_trial), rtol=1e-12)
+    # (up to the surface velocity's change over the move, relative φΔt|ω| = 1e-4 here; the
+    # closest point of x_trial alone would leave all of it: relative 1)
+    off = x - (x_trial + phi * dt * (v - v_trial))
+    along = phi * dt * (v - v_trial)
+    along -= (along @ n) * n
+    assert np.linalg.norm(off - (off @ n) * n) < 1e-3 * np.linalg.norm(along)
+    # the move along the surface is what separates it from the closest point of x_trial
+    moved = np.linalg.norm(x - R * x_trial / np.linalg.norm(x_trial))
+    assert moved > 0.5 * phi * dt * np.linalg.norm((v - v_trial) - ((v - v_trial) @ n) * n)
+    # the normal impulse passes through the centre: only friction turns the sphere
+    f, mo = np.zeros(3), np.zeros(3)
+    _reaction_sums(1, work.c_imp, work.c_arm, work.sum_buf, f, mo)
+    jt = work.c_imp[:, 0] - (work.c_imp[:, 0] @ n) * n
+    np.testing.assert_allclose(mo, -np.cross(x, jt), rtol=1e-12, atol=1e-18)

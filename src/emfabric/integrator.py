@@ -92,7 +92,8 @@ class Integrator:
                           np.empty((3, n)), np.empty((3, n)), np.zeros((depth, depth)))
         # K_d of eq. 3.9 and the iteration limit of one attempt
         k_target = solver.target_iterations if solver.adaptive else solver.max_iterations
-        self.solver = Solver(float(solver.phi), float(solver.tolerance), int(k_target))
+        self.solver = Solver(float(solver.phi), float(solver.tolerance), int(k_target),
+                             solver.predictor == "explicit")
         self.p = solver.exponent
         self.safety = solver.safety
         self.adaptive = solver.adaptive

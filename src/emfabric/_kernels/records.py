@@ -186,6 +186,9 @@ class Solver(NamedTuple):
     tolerance: float
     iteration_limit: int
     """Fixed-point iterations per attempt."""
+    predict: bool
+    """Start the iteration from the explicit prediction x0 + Δt v0 + φΔt² ψ(t)/m (else from x0,
+    the paper's initial iterate)."""
 
 
 class Physics(NamedTuple):
