@@ -112,9 +112,9 @@ def test_spinning_surface_velocity():
 def test_sticking_node_lands_where_its_phi_update_puts_it():
     """With the step's φ and Δt, a node that sticks to a spinning sphere ends where the φ-update
     with its velocity after contact puts it, moved only along the surface normal:
-    x1 − (x_trial + φΔt (v1 − v_trial)) ∥ n (to O(Δt|ω|)). Its velocity is the surface point's there, and the
-    impulse recorded is m (v1 − v_trial). (Without the move along the velocity change the node
-    lags the surface by φΔt J_t/m every step: an O(Δt) error in the spin.)"""
+    x1 − (x_trial + φΔt (v1 − v_trial)) ∥ n (to O(Δt|ω|)). Its velocity is the surface point's
+    there, and the impulse recorded is m (v1 − v_trial). (Without the move along the velocity
+    change the node lags the surface by φΔt J_t/m every step: an O(Δt) error in the spin.)"""
     m, phi, dt = 1e-6, 0.5, 1e-7
     x_trial = np.array([0.003, -0.004, -0.019])
     omega = np.array([0.0, 2000.0, 500.0])

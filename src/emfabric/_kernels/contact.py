@@ -22,7 +22,6 @@ from emfabric._kernels.shapes import (
 )
 from emfabric._kernels.vec3 import cross
 
-
 STICK, SLIDE = 2, 3
 """work.flag of a node in contact at the latest iterate: sticking, sliding (0: no candidate,
 1: candidate not in contact)."""
