@@ -134,3 +134,25 @@ def test_kernel_matches_numpy_reference(nx, ny, seed):
     f, _ = _node_forces(x, nx, ny, coef, rest_w, rest_f, alpha)
     ref = _reference_forces(x, nx, ny, coef, rest_w, rest_f, alpha)
     assert np.allclose(f, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+
+
+@settings(max_examples=200, deadline=None)
+@given(rate=st.floats(0.05, 500.0), u_crit=st.floats(1.0, 1.3),
+       alpha=st.one_of(st.just(1.0), st.just(0.0), st.floats(1e-300, 1.0)),
+       stretch=st.floats(0.5, 3.0), near=st.booleans())
+def test_damage_is_skipped_only_where_it_cannot_change(rate, u_crit, alpha, stretch, near):
+    """damage_above with damage_thresholds' stretch gives damage()'s value to the bit (also
+    next to the threshold, where α = exp(−λ(U − U_c)/U_c) would give back α itself), and it
+    skips the law only where that value is the committed α."""
+    from emfabric._kernels.materials import damage, damage_above, damage_thresholds
+
+    mat = Material(0, 0.0, u_crit, rate, 0.5)
+    thr = np.empty(1)
+    damage_thresholds(np.array([alpha]), mat, thr)
+    if near and 0.0 < alpha < 1.0:
+        # the stretch at which the law gives back α: its own value, to round-off
+        stretch = u_crit * (1.0 - math.log(alpha) / rate) * (1.0 + 1e-15 * (stretch - 1.75))
+    u2 = stretch * stretch
+    assert damage_above(alpha, u2, thr[0], mat) == damage(alpha, u2, mat)
+    if not u2 > thr[0]:
+        assert damage(alpha, u2, mat) == alpha

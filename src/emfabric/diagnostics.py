@@ -8,11 +8,13 @@ module fills; it computes nothing.
 from __future__ import annotations
 
 import math
+import weakref
 from typing import NamedTuple
 
 import numpy as np
 
 from emfabric._kernels import diagnostics as _k
+from emfabric.fastcall import Direct
 from emfabric.fields import fields_at
 from emfabric.model import Model, State
 
@@ -89,15 +91,23 @@ class FabricDiagnostics(NamedTuple):
     """Fastest node speed along the flight direction [m/s]."""
 
 
+_DIRECT: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+"""Per Model: its diagnostics kernels called without the per-call type dispatch (fastcall)."""
+
+
 def _record(model: Model, state: State, row: np.ndarray,
             e_initial: float) -> tuple[FabricDiagnostics, float]:
+    direct = _DIRECT.get(model)
+    if direct is None:
+        direct = _DIRECT[model] = (Direct(_k.fabric_diagnostics), Direct(_k.history_row))
     out = np.empty(_k.COUNT)
     centre = state.body_x if model.has_body else np.zeros(3)
-    _k.fabric_diagnostics(model.physics, state.node_x, state.node_v, state.seg_alpha, centre,
-                          model.flight_direction, out)
-    e0 = _k.history_row(state.t, state.last_dt, state.iterations, state.error, state.rejected,
-                        state.evaluations, state.contact_count, state.body, model.body, out,
-                        state.energy, e_initial, state.contact_force, row)
+    direct[0](None, model.physics, state.node_x, state.node_v, state.seg_alpha, centre,
+              model.flight_direction, out)
+    e0 = direct[1](None, float(state.t), float(state.last_dt), int(state.iterations),
+                   float(state.error), int(state.rejected), int(state.evaluations),
+                   int(state.contact_count), state.body, model.body, out, state.energy,
+                   float(e_initial), state.contact_force, row)
     # the applied field where the projectile is: when a pulse rises, how strong it got
     e, b = fields_at(model.field, centre.reshape(1, 3), state.t)
     row[LAYOUT["field_B"]] = b[0]

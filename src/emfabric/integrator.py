@@ -24,6 +24,7 @@ from emfabric._kernels.step import (
     NOT_FINITE,
     attempt_step,
 )
+from emfabric.fastcall import Direct
 from emfabric.model import Model, State
 
 
@@ -82,7 +83,8 @@ class Integrator:
         self._deferred = False  # serial until the threaded kernel is compiled
         self._background: threading.Thread | None = None
         self._background_ok = False
-        self.work = make_work(model.nx, model.ny, model.seg_count)
+        self.work = make_work(model.nx, model.ny,
+                              model.seg_count if model.physics.contact.segments else 0)
         solver = sc.solver
         # None for the plain fixed point: the step kernel is then compiled without Anderson
         self.accel = None
@@ -99,6 +101,9 @@ class Integrator:
         self.adaptive = solver.adaptive
         self.dt_max = solver.dt_max
         self.dt_min = solver.dt_min
+        # the step and energy kernels without the per-call type dispatch (fastcall)
+        self._attempt = Direct(attempt_step)
+        self._energy = Direct(step_energy)
 
     def _use_threads(self, on: bool) -> None:
         """Pick the serial or the threaded node kernel (the same numbers, bit for bit).
@@ -183,7 +188,7 @@ class Integrator:
         evaluations = 0
         while True:
             args = self._args(s_in, s_out, dt, self.rowbuf, self.threads)
-            status, k, err, nc = attempt_step(*args)
+            status, k, err, nc = self._attempt(self.threaded, *args)
             evaluations += k
             if status == CONVERGED:
                 break
@@ -212,8 +217,8 @@ class Integrator:
         else:
             s_out.dt = s_in.dt
         s_out.energy[:] = s_in.energy
-        step_energy(self.physics, s_in.arrays, s_out.arrays, nc, self.work, s_in.t,
-                    self.solver.phi, dt, s_out.energy)
+        self._energy(None, self.physics, s_in.arrays, s_out.arrays, nc, self.work, s_in.t,
+                     self.solver.phi, dt, s_out.energy)
         s_out.energy_initial = s_in.energy_initial
         s_out.steps = s_in.steps + 1
         s_out.rejected = s_in.rejected + rejected

@@ -55,14 +55,13 @@ def update_forces(model: Model, state: State) -> None:
     m = model
     n = m.node_count
     scratch = state.copy()
-    work = make_work(m.nx, m.ny, m.seg_count)
+    work = make_work(m.nx, m.ny, m.seg_count if m.physics.contact.segments else 0)
     fill_node_fields(m.field, state.node_x, state.node_v, 0.0, state.t, work.node_field)
     fused_iterate(m.nodes, m.yarns, m.material, m.field, work.node_field, state.node_x,
-                  state.node_x,
-                  state.node_v, np.zeros_like(state.node_f), state.seg_alpha, scratch.seg_alpha,
-                  scratch.node_x, scratch.node_v, state.node_f, np.ones(n, dtype=np.uint8),
-                  work.err_rows, work.err_num, work.err_den, state.t, 1.0, 0.0,
-                  np.empty((ROWBUF_ROWS, m.nx + 1)))
+                  state.node_x, state.node_v, np.zeros_like(state.node_f), state.seg_alpha,
+                  scratch.seg_alpha, work.damage_thr, scratch.node_x, scratch.node_v,
+                  state.node_f, np.ones(n, dtype=np.uint8), work.err_rows, work.err_num,
+                  work.err_den, state.t, 1.0, 0.0, np.empty((ROWBUF_ROWS, m.nx + 1)))
     electric_at_nodes(m.field, work.node_field, state.node_x, state.t, state.node_e)
     if m.has_body:
         b = state.body

@@ -51,6 +51,35 @@ def strain_energy_density(u2, mat):
     return 0.5 * e * e
 
 
+@njit(cache=True)
+def damage_thresholds(alpha, mat, out):
+    """For each segment, the stretch² above which damage() can give less than its committed α:
+    α falls only where exp(−λ(U − U_c)/U_c) < α, i.e. U > U_c (1 − ln α / λ) — the largest
+    stretch the segment has reached past U_c. A relative margin of 1e-9 below it keeps every
+    result of damage() to the bit (near the threshold it is still evaluated)."""
+    u_crit = mat.critical_stretch
+    rate = mat.damage_rate
+    for s in range(alpha.shape[0]):
+        a = alpha[s]
+        if not rate > 0.0 or not a > 0.0:
+            out[s] = math.inf  # no damage law, or broken: α cannot change
+        elif a >= 1.0:
+            out[s] = u_crit * u_crit  # intact: damage()'s own test
+        else:
+            u = u_crit * (1.0 - math.log(a) / rate)
+            out[s] = u * u * (1.0 - 1e-9)
+
+
+@njit(cache=True, inline="always")
+def damage_above(alpha, u2, thr2, mat):
+    """damage(alpha, u2, mat) where the stretch² thr2 (damage_thresholds) says it can change,
+    else the committed alpha: the same value, without the square root and the exponential for
+    a segment below its largest stretch so far."""
+    if u2 > thr2:
+        return damage(alpha, u2, mat)
+    return alpha
+
+
 @njit(cache=True, inline="always")
 def damage(alpha, u2, mat):
     """Damage α after a stretch² u2, from the committed α (eq. 2.6): irreversible, only past the

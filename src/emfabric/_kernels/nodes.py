@@ -15,7 +15,7 @@ import math
 from numba import njit, prange
 
 from emfabric._kernels.fields import magnetic_force, node_field
-from emfabric._kernels.materials import damage, fung_stress, ksv_stress, stretch_sq
+from emfabric._kernels.materials import damage_above, fung_stress, ksv_stress, stretch_sq
 from emfabric._kernels.records import MATERIAL_FUNG
 
 
@@ -57,8 +57,8 @@ ROWBUF_ROWS = 26
 
 
 @njit(cache=True)
-def _tensions(xa_x, xa_y, xa_z, xb_x, xb_y, xb_z, count, il2, alpha_c, alpha_t, coef, mat, buf,
-              out, write_alpha):
+def _tensions(xa_x, xa_y, xa_z, xb_x, xb_y, xb_z, count, il2, alpha_c, alpha_t, thr2, coef, mat,
+              buf, out, write_alpha):
     """Tension vectors of `count` segments joining a[i] to b[i] (row views) into out[:, :count].
 
     Split into short loops over few arrays so that the compiler vectorises them.
@@ -73,7 +73,7 @@ def _tensions(xa_x, xa_y, xa_z, xb_x, xb_y, xb_z, count, il2, alpha_c, alpha_t, 
     for i in range(count):
         u2[i] = stretch_sq(dx[i], dy[i], dz[i], il2)
     for i in range(count):
-        al[i] = damage(alpha_c[i], u2[i], mat)
+        al[i] = damage_above(alpha_c[i], u2[i], thr2[i], mat)
     if write_alpha:
         for i in range(count):
             alpha_t[i] = al[i]
@@ -93,8 +93,8 @@ def _tensions(xa_x, xa_y, xa_z, xb_x, xb_y, xb_z, count, il2, alpha_c, alpha_t, 
 
 
 @njit(cache=True)
-def _row_block(j0, j1, nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, t1, phi, dt,
-               skip_err, x1, v1, f1, err_num, err_den, buf):
+def _row_block(j0, j1, nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, thr2, t1,
+               phi, dt, skip_err, x1, v1, f1, err_num, err_den, buf):
     """Rows j0 ≤ j < j1 of the fused iterate. The tensions of row j (warp) and between rows j and
     j + 1 (fill) live in the block's row buffer and are consumed at once; a block recomputes the
     fill tensions below its first row (writing no damage), so blocks are independent."""
@@ -118,7 +118,7 @@ def _row_block(j0, j1, nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, al
         _tensions(xx[a:a + nx], xy[a:a + nx], xz[a:a + nx], xx[a + nx:a + 2 * nx],
                   xy[a + nx:a + 2 * nx], xz[a + nx:a + 2 * nx], nx, il_f,
                   alpha_c[nw + a:nw + a + nx], alpha_t[nw + a:nw + a + nx],
-                  coef[nw + a:nw + a + nx], mat, buf, td, False)
+                  thr2[nw + a:nw + a + nx], coef[nw + a:nw + a + nx], mat, buf, td, False)
     else:
         td[:] = 0.0
     f = buf[_F:_F + 3]
@@ -133,11 +133,12 @@ def _row_block(j0, j1, nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, al
         e = nb + nx
         _tensions(xx[nb:e - 1], xy[nb:e - 1], xz[nb:e - 1], xx[nb + 1:e], xy[nb + 1:e],
                   xz[nb + 1:e], nx - 1, il_w, alpha_c[sb:sb + nx - 1],
-                  alpha_t[sb:sb + nx - 1], coef[sb:sb + nx - 1], mat, buf, twp[:, 1:], True)
+                  alpha_t[sb:sb + nx - 1], thr2[sb:sb + nx - 1], coef[sb:sb + nx - 1], mat, buf,
+                  twp[:, 1:], True)
         if j < ny - 1:
             _tensions(xx[nb:e], xy[nb:e], xz[nb:e], xx[e:e + nx], xy[e:e + nx], xz[e:e + nx],
                       nx, il_f, alpha_c[nw + nb:nw + e], alpha_t[nw + nb:nw + e],
-                      coef[nw + nb:nw + e], mat, buf, tu, True)
+                      thr2[nw + nb:nw + e], coef[nw + nb:nw + e], mat, buf, tu, True)
         else:
             tu[:, :nx] = 0.0
         m = mass[nb:e]
@@ -223,8 +224,8 @@ ROWS_PER_BLOCK = 16
 
 
 @njit(cache=True)
-def fused_iterate(nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, x1, v1, f1,
-                  skip_err, err_rows, err_num, err_den, t1, phi, dt, rowbuf):
+def fused_iterate(nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, thr2, x1, v1,
+                  f1, skip_err, err_rows, err_num, err_den, t1, phi, dt, rowbuf):
     """Yarn tensions at the iterate `prev` and the φ-update of every node from the start state
     (x0, v0, f0, alpha_c) into (x1, v1, f1), trial damage into alpha_t (serial).
 
@@ -236,14 +237,14 @@ def fused_iterate(nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t
     for b in range(blocks):
         j0 = b * ROWS_PER_BLOCK
         j1 = min(ny, j0 + ROWS_PER_BLOCK)
-        _row_block(j0, j1, nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, t1, phi,
-                   dt, skip_err, x1, v1, f1, err_num, err_den, rowbuf)
+        _row_block(j0, j1, nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, thr2,
+                   t1, phi, dt, skip_err, x1, v1, f1, err_num, err_den, rowbuf)
     _row_sums(err_num, err_den, nodes.nx, ny, err_rows)
 
 
 @njit(parallel=True)  # never cached on its own: see the docstring
-def fused_iterate_threads(nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, x1, v1,
-                          f1, skip_err, err_rows, err_num, err_den, t1, phi, dt, rowbuf):
+def fused_iterate_threads(nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, thr2,
+                          x1, v1, f1, skip_err, err_rows, err_num, err_den, t1, phi, dt, rowbuf):
     """fused_iterate over blocks of ROWS_PER_BLOCK rows in parallel threads; rowbuf (blocks,
     ROWBUF_ROWS, nx + 1). Every value is computed by the same arithmetic as in the serial
     kernel, so results do not depend on the number of threads.
@@ -262,6 +263,6 @@ def fused_iterate_threads(nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c,
     for b in prange(blocks):
         j0 = b * ROWS_PER_BLOCK
         j1 = min(ny, j0 + ROWS_PER_BLOCK)
-        _row_block(j0, j1, nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, t1, phi,
-                   dt, skip_err, x1, v1, f1, err_num, err_den, rowbuf[b])
+        _row_block(j0, j1, nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, thr2,
+                   t1, phi, dt, skip_err, x1, v1, f1, err_num, err_den, rowbuf[b])
     _row_sums(err_num, err_den, nodes.nx, ny, err_rows)

@@ -268,18 +268,25 @@ class Work(NamedTuple):
     reaction: np.ndarray
     """Total contact + friction impulse on the body [N s] and its moment about the centre of
     mass [N m s] of the last iterate, (2, 3)."""
+    damage_thr: np.ndarray
+    """Per yarn segment, the stretch² U² above which the damage law can lower its committed α
+    (materials.damage_threshold, filled at the start of each attempt); 0: evaluate it always."""
 
 
 def make_work(nx: int, ny: int, seg_count: int = 0) -> Work:
+    """The workspace of a step; seg_count: the segments segment contact may touch (0 without
+    segment contact: its arrays are then one element long)."""
     n = nx * ny
     nmax = n + seg_count
+    ns = n if seg_count else 1
     return Work(np.empty((3, n)), np.empty((2, ny)), np.empty(n), np.empty(n),
                 np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.uint8),
                 np.empty(max(seg_count, 1), dtype=np.int64),
                 np.zeros(max(seg_count, 1), dtype=np.int8),
                 np.empty(max(seg_count, 1), dtype=np.int64), np.zeros((7, max(seg_count, 1))),
                 np.zeros(2, dtype=np.int64),
-                np.empty((3, n)), np.zeros((2, n)), np.zeros((2, 2, 3, n)),
+                np.empty((3, n)), np.zeros((2, ns)), np.zeros((2, 2, 3, ns)),
                 np.empty(nmax, dtype=np.int64), np.empty(nmax, dtype=np.int64),
                 np.empty((2, nmax)), np.empty((3, nmax)), np.empty((3, nmax)),
-                np.empty((3, nmax)), np.zeros((6, n)), np.empty(nmax), np.zeros((2, 3)))
+                np.empty((3, nmax)), np.zeros((6, n)), np.empty(nmax), np.zeros((2, 3)),
+                np.zeros(ny * (nx - 1) + nx * (ny - 1)))

@@ -26,6 +26,7 @@ from emfabric._kernels.fields import (
     fill_node_fields_threads,
     with_sources,
 )
+from emfabric._kernels.materials import damage_thresholds
 from emfabric._kernels.nodes import fused_iterate, fused_iterate_threads
 from emfabric._kernels.records import BODY_R0, BODY_V, BODY_W, BODY_X
 from emfabric._kernels.shapes import bounding_radius, is_inside
@@ -90,14 +91,14 @@ def fabric_iterate(phys, prev, sin, skip_err, cur, v1, f1, alpha_t, work, rowbuf
     if rowbuf is None:
         if threads is not None:
             fused_iterate_threads(phys.nodes, phys.yarns, phys.material, phys.field,
-                                  work.node_field, prev,
-                                  sin.x, sin.v, sin.f, sin.alpha, alpha_t, cur, v1, f1, skip_err,
+                                  work.node_field, prev, sin.x, sin.v, sin.f, sin.alpha, alpha_t,
+                                  work.damage_thr, cur, v1, f1, skip_err,
                                   work.err_rows, work.err_num, work.err_den, t1, phi, dt,
                                   threads)
     else:
         fused_iterate(phys.nodes, phys.yarns, phys.material, phys.field, work.node_field,
-                      prev, sin.x, sin.v,
-                      sin.f, sin.alpha, alpha_t, cur, v1, f1, skip_err, work.err_rows,
+                      prev, sin.x, sin.v, sin.f, sin.alpha, alpha_t, work.damage_thr, cur, v1,
+                      f1, skip_err, work.err_rows,
                       work.err_num, work.err_den, t1, phi, dt, rowbuf)
 
 
@@ -162,6 +163,8 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
     # Plain fixed point: prev and cur alternate between xbuf and x1. Anderson: cur is always
     # x1 = G(prev) and the next prev is the mixed iterate in accel[0]. accel is None for the
     # plain fixed point: Numba then drops the Anderson branches when it compiles this kernel.
+    # where the damage law can change α this attempt (materials.damage_thresholds)
+    damage_thresholds(sin.alpha, phys.material, work.damage_thr)
     if solver.predict:
         _predict(x0, v0, sin.f, inv_mass, phi, dt, xbuf)
         for c in range(3):
