@@ -201,7 +201,8 @@ def build_model(scenario: Scenario) -> Model:
             bound=float(geo.bound),
         ),
         contact=Contact(float(scenario.contact.static_friction),
-                        float(scenario.contact.dynamic_friction), bool(segments)),
+                        float(scenario.contact.dynamic_friction), bool(segments),
+                        scenario.contact.placement == "phi-update"),
     )
     model = Model(
         scenario=scenario,

@@ -333,6 +333,11 @@ class Contact(_Section):
     """Also resolve contact of the yarn segments between the nodes (true), or of the nodes
     only (false, the paper's model); "auto": nodes only for the sphere, nodes and segments for
     the other shapes (a pointed nose can pass between nodes)."""
+    placement: Literal["phi-update", "closest-point"] = "phi-update"
+    """Where a node in contact is put: "phi-update", the closest surface point to where the
+    φ-update with its velocity after contact takes it (follows the surface; default), or
+    "closest-point", the closest surface point to its position before contact (the paper as
+    printed: an O(Δt) lag of sticking nodes, docs/theory.md §5)."""
 
     @model_validator(mode="after")
     def _dynamic_not_above_static(self) -> Contact:

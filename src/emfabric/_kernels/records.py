@@ -176,6 +176,9 @@ class Contact(NamedTuple):
     dynamic_friction: float
     segments: bool = False
     """Also resolve contact of the yarn segments (not only the nodes) against the body."""
+    follow: bool = True
+    """Put a node in contact where the φ-update with its velocity after contact takes it (else
+    at the closest point of its position before contact, the paper as printed)."""
 
 
 class Solver(NamedTuple):

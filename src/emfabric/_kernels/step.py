@@ -188,8 +188,8 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
         num_b = 0.0
         den_b = 0.0
         if body.active:
-            nc = node_contact(nodes, body, phys.contact, b_out, ncand, cur, v1, work, phi, dt,
-                              k > FREEZE_AFTER)
+            nc = node_contact(nodes, body, phys.contact, b_out, ncand, cur, v1, work,
+                              phi if phys.contact.follow else 0.0, dt, k > FREEZE_AFTER)
             if phys.contact.segments:
                 nc = segment_contact(nodes, phys.yarns, body, phys.contact, b_out, nseg, nc,
                                      cur, v1, work)
