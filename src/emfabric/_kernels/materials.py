@@ -74,8 +74,10 @@ def damage_thresholds(alpha, mat, out):
 def damage_above(alpha, u2, thr2, mat):
     """damage(alpha, u2, mat) where the stretch² thr2 (damage_thresholds) says it can change,
     else the committed alpha: the same value, without the square root and the exponential for
-    a segment below its largest stretch so far."""
-    if u2 > thr2:
+    a segment below its largest stretch so far. thr2 is read only past the critical stretch
+    (for most segments it is not read at all: memory traffic on large sheets)."""
+    u_crit = mat.critical_stretch
+    if u2 > u_crit * u_crit and u2 > thr2:
         return damage(alpha, u2, mat)
     return alpha
 
