@@ -4,8 +4,10 @@
     sheet, in ns per segment, against the same evaluation in NVIDIA Warp on its CPU device;
 (b) the paper-field full run, warm, and where its time goes;
 (c) start-up: a fresh process up to its first accepted step, with a cold and a warm Numba cache;
-(d) memory per node and peak resident memory.
-``--schemes`` instead compares the solver schemes on paper-field against a tight reference.
+(d) memory per node and peak resident memory;
+(e) the spin's error at the default settings against a converged run (paper-field by default);
+(f) a struck 1000×1000 sheet: time per step, Δt, memory; (g) whole-run cost against the grid.
+``--schemes`` instead weighs solver settings on paper-field against (e)'s converged run.
 """
 
 from __future__ import annotations
@@ -533,60 +535,49 @@ def print_memory(rows: list[dict]) -> None:
 
 # --- schemes ------------------------------------------------------------------------------
 
-def bench_schemes(base: dict) -> None:
+LEVERS = [
+    ("default", {}),
+    ("predictor = start (the paper's iterate 0)", {"solver.predictor": "start"}),
+    ("scheme = anderson", {"solver.scheme": "anderson"}),
+    ("target_iterations = 4", {"solver.target_iterations": 4}),
+    ("target_iterations = 8", {"solver.target_iterations": 8}),
+    ("tolerance = 1e-5", {"solver.tolerance": 1e-5}),
+    ("safety = 1 (the paper's controller)", {"solver.safety": 1.0}),
+    ("placement = closest-point (paper)", {"contact.placement": "closest-point"}),
+    ("closest-point, dt_max = 2e-8", {"contact.placement": "closest-point",
+                                      "solver.dt_max": 2e-8}),
+]
+"""The solver settings --schemes weighs: each changes one thing from the defaults."""
+
+
+def bench_schemes(ref_dt: float, cache: Path | None) -> None:
+    """paper-field with each of LEVERS: cost, and error against the converged run of (e)."""
     from emfabric import load_scenario
     from emfabric import run as run_scenario
 
-    cases = [
-        ("reference: tol 1e-9, dt_max 2e-8", {"solver.tolerance": 1e-9, "solver.dt_max": 2e-8}),
-        ("fixed-point (default, tol 1e-6)", {}),
-        ("anderson", {"solver.scheme": "anderson"}),
-        # how far the reference itself is from converged in Δt
-        ("check: tol 1e-9, dt_max 1e-8", {"solver.tolerance": 1e-9, "solver.dt_max": 1e-8}),
-    ]
     run_scenario(load_scenario(SCENARIO, {"solver.end_time": STARTUP_END_TIME}))
-    done = {}
-    for name, overrides in cases:
+    ref, _ = _history_run(SCENARIO, {"solver.dt_max": ref_dt,
+                                     "solver.tolerance": REFERENCE_TOL}, cache)
+    say(f"Solver settings on '{SCENARIO}', each against the converged run of (e) (tolerance "
+        f"{REFERENCE_TOL:g}, dt_max {ref_dt:g} s): ω_x error over the contact phase (fraction "
+        "of its peak) and at its end")
+    say(f"    {'settings':<42} {'wall s':>7} {'steps':>6} {'rej.':>5} {'evals':>7} "
+        f"{'µs/eval':>8} {'mean Δt s':>10} {'ω(t) error':>11} {'exit error':>11}")
+    for name, overrides in LEVERS:
         gc.collect()  # start each run from the same small heap
         start = cpu_snapshot()
         try:
-            res = run_scenario(load_scenario(SCENARIO, {**base, **overrides}))
-        except Exception as err:  # a scheme that is not available (yet)
-            done[name] = f"not run: {type(err).__name__}: {err}"
+            run, s = _history_run(SCENARIO, overrides, None)
+        except Exception as err:  # noqa: BLE001 - a setting that fails is a result too
+            say(f"    {name:<42} failed: {type(err).__name__}: {str(err)[:120]}")
             continue
-        h = res.history
-        done[name] = (h["time"].values, h["angular_velocity"].values, h["tilt"].values,
-                      res.summary, other_cpu(start))
-        del res, h
-    runs = {k: v for k, v in done.items() if not isinstance(v, str)}
-    # runs may stop at different times (rebound, perforation): compare at the earliest end
-    t_c = min(float(t[-1]) for t, *_ in runs.values())
-    say(f"Schemes on '{SCENARIO}': ω and max tilt up to t = {t_c * 1e6:.1f} µs (the earliest "
-        "end of these runs) against the first run")
-    say(f"    {'scheme':<34} {'wall s':>7} {'steps':>6} {'evals':>7} {'µs/eval':>8} "
-        f"{'end µs':>7} {'ω_x rad/s':>10} {'|Δω|/|ω_ref|':>13} {'max tilt °':>10} "
-        f"{'Δtilt/tilt':>11}")
-    ref = None
-    for name, _ in cases:
-        if isinstance(done[name], str):
-            say(f"    {name:<34} {done[name]}")
-            continue
-        t, omega, tilt_t, s, busy = done[name]
-        w = np.array([np.interp(t_c, t, omega[:, c]) for c in range(3)])
-        tilt = float(tilt_t[t <= t_c].max())
-        if ref is None:
-            ref = (w, tilt)
-        dw = np.linalg.norm(w - ref[0]) / np.linalg.norm(ref[0])
-        dtilt = abs(tilt - ref[1]) / ref[1]
+        busy = other_cpu(start)
+        e = spin_error(run, ref, (0,))
         ev = s["force_evaluations"]
-        say(f"    {name:<34} {s['wall_time_s']:7.1f} {s['steps']:6d} {ev:7d} "
-            f"{s['wall_time_s'] / ev * 1e6:8.0f} {s['time_s'] * 1e6:7.1f} {w[0]:10.2f} "
-            f"{dw:13.2e} {np.degrees(tilt):10.3f} {dtilt:11.2e}"
+        say(f"    {name:<42} {s['wall_time_s']:7.2f} {s['steps']:6d} {s['rejected_steps']:5d} "
+            f"{ev:7d} {s['wall_time_s'] / ev * 1e6:8.0f} {s['time_s'] / s['steps']:10.3g} "
+            f"{100 * e['track']:10.2f}% {100 * e['exit']:10.2f}%"
             + ("" if busy < 0.1 else f"  ! machine busy ({busy:.2f} other cores)"))
-    fp, an = runs.get(cases[1][0]), runs.get(cases[2][0])
-    if fp and an and np.array_equal(fp[1], an[1]):
-        say("    note: 'anderson' gave results identical to fixed-point bit for bit: the option "
-            "is accepted but has no effect")
 
 
 # --- (e) accuracy at the default settings --------------------------------------------------
@@ -967,13 +958,14 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--runs", type=int, default=3, help="full paper-field runs in (b)")
     p.add_argument("--no-full-run", action="store_true", help="skip (b)")
     p.add_argument("--end-time", type=float, metavar="SECONDS",
-                   help="solver.end_time of the runs of (b) and --schemes (default: the "
+                   help="solver.end_time of the runs of (b) (default: the "
                         "scenario's)")
     p.add_argument("--no-cold", action="store_true",
                    help="skip the cold-cache start-up (it recompiles every kernel)")
     p.add_argument("--no-warp", action="store_true", help="leave Warp out of (a)")
     p.add_argument("--schemes", action="store_true",
-                   help="only compare the solver schemes on full paper-field runs (minutes)")
+                   help="only weigh solver settings on paper-field against (e)'s converged "
+                        "run (minutes)")
     p.add_argument("--fields", action="store_true",
                    help="only time the field sources (uniform, loop, pulsed loop, map)")
     p.add_argument("--accuracy", nargs="*", metavar="SCENARIO", default=["paper-field"],
@@ -1016,7 +1008,7 @@ def main(argv: list[str] | None = None) -> None:
         say(f"Other processes used {other_cpu(cpu0):.2f} cores on average while this ran")
         return
     if a.schemes:
-        bench_schemes(base)
+        bench_schemes(a.reference_dt, a.reference_cache)
         say(f"Other processes used {other_cpu(cpu0):.2f} cores on average while this ran")
         return
     if a.accuracy_only:
