@@ -166,8 +166,12 @@ def stretch(model, x: np.ndarray) -> np.ndarray:
 def iterate_args(integ, s, s2, dt: float) -> tuple:
     """fabric_iterate's arguments for one iterate from state s into s2, in the integrator's own
     workspace (its layout is the kernel's business): the first iterate of a step at dt."""
+    from emfabric._kernels.materials import damage_thresholds
+
     work = integ.work
     work.xbuf[:] = s.node_x
+    # as an attempt does: where the damage law can change α (the kernel skips it elsewhere)
+    damage_thresholds(s.seg_alpha, integ.physics.material, work.damage_thr, work.damage_alpha)
     return (integ.physics, work.xbuf, s.arrays, work.flag, s2.node_x, s2.node_v, s2.node_f,
             s2.seg_alpha, work, integ.rowbuf, integ.threads, s.t + dt, integ.solver.phi, dt)
 

@@ -52,15 +52,20 @@ def strain_energy_density(u2, mat):
 
 
 @njit(cache=True)
-def damage_thresholds(alpha, mat, out):
+def damage_thresholds(alpha, mat, out, done):
     """For each segment, the stretch² above which damage() can give less than its committed α:
     α falls only where exp(−λ(U − U_c)/U_c) < α, i.e. U > U_c (1 − ln α / λ) — the largest
     stretch the segment has reached past U_c. A relative margin of 1e-9 below it keeps every
-    result of damage() to the bit (near the threshold it is still evaluated)."""
+    result of damage() to the bit (near the threshold it is still evaluated). `done` holds the
+    α each threshold in `out` belongs to: only segments whose α differs are recomputed (a
+    logarithm each; most steps change few α)."""
     u_crit = mat.critical_stretch
     rate = mat.damage_rate
     for s in range(alpha.shape[0]):
         a = alpha[s]
+        if a == done[s]:
+            continue
+        done[s] = a
         if not rate > 0.0 or not a > 0.0:
             out[s] = math.inf  # no damage law, or broken: α cannot change
         elif a >= 1.0:
@@ -74,10 +79,8 @@ def damage_thresholds(alpha, mat, out):
 def damage_above(alpha, u2, thr2, mat):
     """damage(alpha, u2, mat) where the stretch² thr2 (damage_thresholds) says it can change,
     else the committed alpha: the same value, without the square root and the exponential for
-    a segment below its largest stretch so far. thr2 is read only past the critical stretch
-    (for most segments it is not read at all: memory traffic on large sheets)."""
-    u_crit = mat.critical_stretch
-    if u2 > u_crit * u_crit and u2 > thr2:
+    a segment below its largest stretch so far."""
+    if u2 > thr2:
         return damage(alpha, u2, mat)
     return alpha
 

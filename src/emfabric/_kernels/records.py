@@ -273,7 +273,10 @@ class Work(NamedTuple):
     mass [N m s] of the last iterate, (2, 3)."""
     damage_thr: np.ndarray
     """Per yarn segment, the stretch² U² above which the damage law can lower its committed α
-    (materials.damage_threshold, filled at the start of each attempt); 0: evaluate it always."""
+    (materials.damage_thresholds, brought up to date at the start of each attempt); 0: evaluate
+    it always."""
+    damage_alpha: np.ndarray
+    """The α each damage_thr was computed for (NaN: not yet)."""
 
 
 def make_work(nx: int, ny: int, seg_count: int = 0) -> Work:
@@ -292,4 +295,5 @@ def make_work(nx: int, ny: int, seg_count: int = 0) -> Work:
                 np.empty(nmax, dtype=np.int64), np.empty(nmax, dtype=np.int64),
                 np.empty((2, nmax)), np.empty((3, nmax)), np.empty((3, nmax)),
                 np.empty((3, nmax)), np.zeros((6, n)), np.empty(nmax), np.zeros((2, 3)),
-                np.zeros(ny * (nx - 1) + nx * (ny - 1)))
+                np.zeros(ny * (nx - 1) + nx * (ny - 1)),
+                np.full(ny * (nx - 1) + nx * (ny - 1), np.nan))

@@ -164,7 +164,7 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
     # x1 = G(prev) and the next prev is the mixed iterate in accel[0]. accel is None for the
     # plain fixed point: Numba then drops the Anderson branches when it compiles this kernel.
     # where the damage law can change α this attempt (materials.damage_thresholds)
-    damage_thresholds(sin.alpha, phys.material, work.damage_thr)
+    damage_thresholds(sin.alpha, phys.material, work.damage_thr, work.damage_alpha)
     if solver.predict:
         _predict(x0, v0, sin.f, inv_mass, phi, dt, xbuf)
         for c in range(3):
