@@ -129,10 +129,11 @@ def node_contact(nodes, body, law, b_state, ncand, x1, v1, work, phi, dt, frozen
     φ-update with its velocity after contact takes it: the closest surface point to
     x1 + φΔt·J/m (a sticking node moves with the surface; moving it only to the closest point
     of its free-flight position left its tangential position lagging the surface by φΔt J_t/m
-    every step, an O(Δt) error in the spin: 17 % of the peak ω_x of paper-field at the default
-    Δt, 1.6 % with the move). When `frozen` (late iterates of an
-    attempt) a contact keeps the stick/slide decision of the previous iterate, and a node in
-    contact at the previous iterate keeps its contact while it stays within
+    every step, an O(Δt) error in the spin: docs/theory.md §5, docs/performance.md (e)). A
+    contact kept within the margin outside the surface and given an impulse is put on the
+    surface the same way. When `frozen` (late iterates of an attempt) a contact keeps the
+    stick/slide decision of the previous iterate, and a node in contact at the previous
+    iterate keeps its contact while it stays within
     shapes.contact_margin outside the surface (so does any contact with segment contact on):
     neither then switches on and off from one iterate to the next. Keeps the candidates'
     velocities before contact (work.v_pre), writes corrected x1, v1 and records per contact

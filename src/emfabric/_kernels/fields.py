@@ -7,7 +7,6 @@ Every kernel that needs the field at a point (node update, body wrench, energy b
 calls field_at; a new field source is a new branch here and a new scenario entry.
 """
 
-
 import math
 
 import numpy as np
