@@ -140,9 +140,9 @@ def machine() -> list[str]:
 def deformed_sheet(n: int, overrides: dict | None = None):
     """A paper-field n×n sheet (no projectile) dented and moving: (model, integrator, state)."""
     from emfabric import load_scenario
-    from emfabric.builder import build_model
-    from emfabric.integrator import Integrator
-    from emfabric.state import initial_state, update_forces
+    from emfabric.integrators import Integrator
+    from emfabric.sim.builder import build_model
+    from emfabric.sim.state import initial_state, update_forces
 
     sc = load_scenario(SCENARIO, {"fabric.nodes": [n, n], "projectile.shape": "none",
                                   **(overrides or {})})
@@ -329,9 +329,9 @@ def print_evaluations(rows: list[dict], threads: list[int], warp_note: str,
 def _step_loop(sc, steps: int, samples: list | None):
     """The run's steps as a bare Integrator.step loop (no recording): (seconds, model, integ);
     appends 10 evenly spaced (state, candidate flags) pairs to `samples` when given one."""
-    from emfabric.builder import build_model
-    from emfabric.integrator import Integrator
-    from emfabric.state import initial_state
+    from emfabric.integrators import Integrator
+    from emfabric.sim.builder import build_model
+    from emfabric.sim.state import initial_state
 
     t_end = sc.solver.end_time
     keep_at = set(np.linspace(max(1, steps // 10), steps, 10, dtype=int).tolist())
@@ -501,9 +501,9 @@ def peak_rss() -> int:
 def child_memory(n: int) -> dict:
     """In a fresh interpreter: build the n×n paper-field model, integrator and two states."""
     from emfabric import load_scenario
-    from emfabric.builder import build_model
-    from emfabric.integrator import Integrator
-    from emfabric.state import initial_state
+    from emfabric.integrators import Integrator
+    from emfabric.sim.builder import build_model
+    from emfabric.sim.state import initial_state
 
     rss0 = peak_rss()
     model = build_model(load_scenario(SCENARIO, {"fabric.nodes": [n, n]}))
@@ -696,9 +696,9 @@ def bench_large(n: int, after_contact: float) -> dict:
     controller's first shrinking from dt_max is not what a run spends its time on). Time per
     step, Δt, evaluations per step, bytes of the run's arrays, peak memory."""
     from emfabric import load_scenario
-    from emfabric.builder import build_model
-    from emfabric.integrator import Integrator
-    from emfabric.state import initial_state
+    from emfabric.integrators import Integrator
+    from emfabric.sim.builder import build_model
+    from emfabric.sim.state import initial_state
 
     sc = load_scenario(SCENARIO, {"fabric.nodes": [n, n]})
     rss0 = peak_rss()

@@ -17,8 +17,8 @@ import numpy as np
 from reproduce_paper import print_table  # scripts/ is on the path when run
 
 import emfabric
-from emfabric.builder import build_field
-from emfabric.fields import fields_at
+from emfabric.sources.build import build_field
+from emfabric.sources.evaluate import fields_at
 
 NAMES = ("paper-field", "coil-pulse")
 

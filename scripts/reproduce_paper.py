@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 import emfabric
-from emfabric.plots import plot_runs
+from emfabric.viz.plots import plot_runs
 
 NAMES = ("paper-no-field", "paper-field", "paper-spin")
 

@@ -18,7 +18,7 @@ import numpy as np
 from reproduce_paper import print_table  # scripts/ is on the path when run
 
 import emfabric
-from emfabric.plots import plot_runs
+from emfabric.viz.plots import plot_runs
 
 NAMES = ("ogive-no-field", "ogive-field", "ogive-yawed", "fsp")
 RUNS = {  # run name: (built-in scenario, overrides)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from emfabric.scenario import Scenario
+from emfabric.config.scenario import Scenario
 
 
 def make(**dotted) -> Scenario:
@@ -33,8 +33,8 @@ def tmp_run_dir(tmp_path):
 
 def run_demo(out, overrides, progress=None):
     """Run the demo-small scenario with overrides into `out` and return `out`."""
-    from emfabric.runner import run
-    from emfabric.scenario import load_scenario
+    from emfabric.config.scenario import load_scenario
+    from emfabric.runner.loop import run
 
     run(load_scenario("demo-small", overrides), out, progress=progress)
     return out

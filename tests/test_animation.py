@@ -11,7 +11,7 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from emfabric import animation, plots
+from emfabric.viz import animation, plots
 
 from conftest import interrupted_demo, run_demo
 
@@ -79,7 +79,7 @@ def test_movie_colour_range_is_the_run_damage_range(movie_run):
 def test_partial_run_is_animated(tmp_path, caplog):
     """An interrupted run is animated as far as it got, with a warning that it is partial."""
     interrupted_demo(tmp_path, TINY, after=12)
-    with caplog.at_level(logging.WARNING, logger="emfabric.animation"):
+    with caplog.at_level(logging.WARNING, logger="emfabric.viz.animation"):
         (mp4,) = animation.animate(tmp_path, fps=4)
     assert any("partial" in r.getMessage() for r in caplog.records)
     with imageio.get_reader(mp4, format="FFMPEG") as reader:
@@ -110,7 +110,7 @@ def test_without_ffmpeg_the_gif_still_works_and_mp4_says_what_to_install(movie_r
     monkeypatch.setattr(animation, "mp4_available", lambda: False)
     with pytest.raises(RuntimeError, match=r"emfabric\[mp4\]"):
         animation.animate(movie_run)
-    with caplog.at_level(logging.WARNING, logger="emfabric.animation"):
+    with caplog.at_level(logging.WARNING, logger="emfabric.viz.animation"):
         files = animation.animate(movie_run, gif=True)
     assert files == [movie_run / "figures" / "impact.gif"]
     assert any("emfabric[mp4]" in r.getMessage() for r in caplog.records)

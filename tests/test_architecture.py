@@ -1,5 +1,6 @@
-"""The seams of docs/architecture.md: no import cycles, one definition per concept, a recorder
-that computes nothing."""
+"""The layers and seams of docs/architecture.md: imports between layers only downwards (by
+folder), no import cycles, every compiled function under _kernels/, one definition per concept,
+a recorder that computes nothing."""
 
 import ast
 import re
@@ -8,33 +9,127 @@ from pathlib import Path
 SRC = Path(__file__).resolve().parents[1] / "src" / "emfabric"
 KERNELS = SRC / "_kernels"
 
+LAYERS = {
+    # layer (folder under src/emfabric): the layers it may import (itself always)
+    "config": set(),
+    "_kernels": set(),
+    "sources": {"config", "_kernels"},
+    "sim": {"config", "sources", "_kernels"},
+    "integrators": {"sim", "_kernels"},
+    "io": {"sim", "config", "_kernels"},
+    "runner": {"integrators", "io", "sim", "config", "_kernels"},
+    "viz": {"io", "config"},
+    "studies": {"runner", "sources", "sim", "io", "viz", "config"},
+    "cli": {"studies", "runner", "integrators", "viz", "io", "sim", "sources", "config",
+            "_kernels"},
+}
+"""The package's own top-level modules (__init__, __main__) are the façade: they may import
+any layer, and every layer may import the package itself (for __version__)."""
+
 
 def _module(path: Path) -> str:
     parts = path.relative_to(SRC).with_suffix("").parts
     return ".".join(("emfabric", *parts)).removesuffix(".__init__")
 
 
-def _imports(path: Path, modules: set[str]) -> set[str]:
+def _layer(module: str) -> str | None:
+    """The layer of a module name (None for the package façade)."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 2 or (len(parts) == 2 and parts[1] in LAYERS) else None
+
+
+def _type_checking_nodes(tree: ast.AST) -> set[ast.AST]:
+    """Nodes under `if TYPE_CHECKING:` (annotations only: no import at run time)."""
     out = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("emfabric"):
-            for alias in node.names:
-                full = f"{node.module}.{alias.name}"
-                out.add(full if full in modules else node.module)
-        elif isinstance(node, ast.Import):
-            out.update(a.name for a in node.names if a.name.startswith("emfabric"))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            for child in node.body:
+                out.update(ast.walk(child))
     return out
 
 
+def _imported(path: Path) -> list[str]:
+    """Every emfabric module a file imports, at module level or inside a function."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    skip = _type_checking_nodes(tree)
+    out = []
+    for node in ast.walk(tree):
+        if node in skip:
+            continue
+        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("emfabric"):
+            out.append(node.module)
+            out.extend(f"{node.module}.{a.name}" for a in node.names)
+        elif isinstance(node, ast.Import):
+            out.extend(a.name for a in node.names if a.name.startswith("emfabric"))
+    return out
+
+
+def test_every_module_belongs_to_a_layer():
+    """src/emfabric holds only the façade files and the layer folders of LAYERS."""
+    top = {p.name for p in SRC.iterdir() if p.suffix == ".py"}
+    assert top == {"__init__.py", "__main__.py"}
+    folders = {p.name for p in SRC.iterdir() if p.is_dir() and (p / "__init__.py").exists()}
+    assert folders == set(LAYERS)
+
+
+def test_layers_import_only_downwards():
+    """A module imports only its own layer, the layers LAYERS allows it, and the package itself;
+    imports inside functions count (a lazy import is still a dependency)."""
+    modules = {_module(p) for p in SRC.rglob("*.py")}
+    wrong = []
+    for path in sorted(SRC.rglob("*.py")):
+        layer = _layer(_module(path))
+        if layer is None:
+            continue
+        for target in _imported(path):
+            if target not in modules and target.rsplit(".", 1)[0] in modules:
+                target = target.rsplit(".", 1)[0]  # a name imported from a module
+            other = _layer(target)
+            if other is not None and other != layer and other not in LAYERS[layer]:
+                wrong.append(f"{_module(path)} imports {target}")
+    assert not wrong, "\n".join(wrong)
+
+
+def test_compiled_code_only_under_kernels():
+    """Every Numba-compiled function lives in _kernels/ (cached by the digest of those sources:
+    a compiled function elsewhere that inlines a kernel would run stale code after an edit)."""
+    numba_decorators = {"njit", "jit", "vectorize", "guvectorize", "cfunc", "generated_jit"}
+    hits = []
+    for path in sorted(SRC.rglob("*.py")):
+        if path.parent == KERNELS:
+            continue
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.Import | ast.ImportFrom):
+                names = [a.name for a in node.names]
+                mod = getattr(node, "module", None) or ""
+                if mod.startswith("numba") and set(names) & numba_decorators:
+                    hits.append(f"{path.relative_to(SRC)} imports {names}")
+            if isinstance(node, ast.FunctionDef):
+                for dec in node.decorator_list:
+                    name = ast.unparse(dec).split("(")[0].split(".")[-1]
+                    if name in numba_decorators:
+                        hits.append(f"{path.relative_to(SRC)}: {node.name}")
+    assert not hits, hits
+
+
 def test_no_import_cycles():
-    """scenario → builder → model/state → integrator → recorder/io: no module imports, even
-    lazily inside a function, a module that imports it back."""
+    """No module imports, even lazily inside a function, a module that imports it back."""
     files = {_module(p): p for p in SRC.rglob("*.py")}
-    graph = {m: {d for d in _imports(p, set(files)) if d in files and d != m}
-             for m, p in files.items()}
+    graph = {}
+    for m, p in files.items():
+        deps = set()
+        for d in _imported(p):
+            d = d if d in files else d.rsplit(".", 1)[0]
+            if d in files and d != m:
+                deps.add(d)
+        graph[m] = deps
     graph.pop("emfabric", None)  # the package façade imports the public functions
     for deps in graph.values():
         deps.discard("emfabric")
+        # a package's __init__ re-exports its modules: importing a module of a package runs it
+        deps.difference_update({d for d in list(deps) if files[d].name == "__init__.py"
+                                and any(x.startswith(d + ".") for x in deps)})
     state: dict[str, int] = {}
     cycle: list[str] = []
 
@@ -87,20 +182,21 @@ def test_each_concept_has_one_definition():
 
 
 def test_recorder_computes_no_physics():
-    """io/history stores the rows emfabric.diagnostics fills; it imports no kernel."""
+    """io/history stores the rows emfabric.sim.diagnostics fills; it imports no kernel."""
     text = (SRC / "io" / "history.py").read_text(encoding="utf-8")
     assert "_kernels" not in text
-    assert "emfabric.diagnostics import" in text
+    assert "emfabric.sim.diagnostics import" in text
 
 
 def test_optional_dependencies_stay_optional():
     """magpylib (the "magnets" extra), Dask and SciPy (the "studies" extra) are imported only
     inside the functions that need them: the tests' environment has them, a user's without the
     extras must not (an undeclared SciPy once broke every new install)."""
-    allowed = {("emfabric.source_grid", "magnet_fields"),
-               ("emfabric.source_grid", "import_magpylib"),
-               ("emfabric.ballistic", "fit_lambert_jonas"), ("emfabric.ballistic", "fit_v50"),
-               ("emfabric.study", "connect"), ("emfabric.study", "run_cases")}
+    allowed = {("emfabric.sources.grid", "magnet_fields"),
+               ("emfabric.sources.grid", "import_magpylib"),
+               ("emfabric.studies.ballistic", "fit_lambert_jonas"),
+               ("emfabric.studies.ballistic", "fit_v50"),
+               ("emfabric.studies.sweep", "connect"), ("emfabric.studies.sweep", "run_cases")}
     for path in SRC.rglob("*.py"):
         tree = ast.parse(path.read_text(encoding="utf-8"))
         owner = {}

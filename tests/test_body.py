@@ -5,9 +5,9 @@ import pytest
 
 from emfabric._kernels.body import field_wrench
 from emfabric._kernels.records import BODY_R0, BODY_ROWS, BODY_V, BODY_W, SHAPE_SPHERE, Body, Field
-from emfabric.builder import build_model
-from emfabric.integrator import Integrator
-from emfabric.state import initial_state
+from emfabric.integrators import Integrator
+from emfabric.sim.builder import build_model
+from emfabric.sim.state import initial_state
 
 from conftest import make
 

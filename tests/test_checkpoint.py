@@ -14,7 +14,7 @@ import pytest
 import xarray as xr
 
 import emfabric
-from emfabric.builder import build_model
+from emfabric.config.scenario import load_scenario
 from emfabric.io.checkpoint import (
     CHECKPOINT,
     CheckpointError,
@@ -22,9 +22,9 @@ from emfabric.io.checkpoint import (
     read_checkpoint,
     write_checkpoint,
 )
-from emfabric.model import State
-from emfabric.runner import resume, run
-from emfabric.scenario import load_scenario
+from emfabric.runner.loop import resume, run
+from emfabric.sim.builder import build_model
+from emfabric.sim.state import State
 
 from conftest import interrupted_demo
 

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from emfabric._kernels.coils import MU0, current_at, elliptic_ke
-from emfabric.builder import build_field
-from emfabric.fields import fields_at
-from emfabric.runner import run
-from emfabric.scenario import ScenarioError
+from emfabric.config.scenario import ScenarioError
+from emfabric.runner.loop import run
+from emfabric.sources.build import build_field
+from emfabric.sources.evaluate import fields_at
 
 from conftest import fabric_only, make
 
@@ -324,7 +324,7 @@ def test_map_warns_once_about_nodes_outside(tmp_path, caplog):
     x < −0.1 start outside; the run says how many, once."""
     import logging
 
-    from emfabric.builder import build_model
+    from emfabric.sim.builder import build_model
 
     xs = np.array([-0.1, 0.0, 0.2])
     path = str(_write_map(tmp_path / "map.nc", _linear, with_e=False, xs=xs))
@@ -364,7 +364,7 @@ def test_wire_radius_must_be_below_half_the_loop_radius():
 def test_sources_round_trip_through_toml(tmp_path):
     """A scenario with sources written as TOML (what history.nc and the checkpoint store) reads
     back as the same scenario and the same field."""
-    from emfabric.scenario import load_scenario
+    from emfabric.config.scenario import load_scenario
 
     sc = make(**{"field.sources": [
         _loop(waveform="table", table=[[0.0, 0.0], [1e-4, 2.0]], current=None)
@@ -386,7 +386,7 @@ def test_sources_round_trip_through_toml(tmp_path):
 def test_builtin_coil_pulse_reaches_the_paper_field_at_its_peak():
     """coil-pulse: a Helmholtz pair, B = (4/5)^{3/2} μ₀ N I(t) / R along x at the centre, with
     I(t) = I₀ e^{−t/τ} sin ωt peaking where tan ωt = ωτ: there B is the paper's 0.05 T to 0.1 %."""
-    from emfabric.scenario import load_scenario
+    from emfabric.config.scenario import load_scenario
 
     sc = load_scenario("coil-pulse")
     src = sc.field.sources[0]
@@ -427,10 +427,10 @@ def test_even_map_finds_its_cells_by_division(tmp_path):
     np.testing.assert_allclose(got_b, np.array(ref_b).T, rtol=1e-12, atol=1e-15)
 
 
-# --- the source grid (emfabric.source_grid) and permanent magnets --------------------------
+# --- the source grid (emfabric.sources.grid) and permanent magnets --------------------------
 
 def _grid_model(cells=64, **over):
-    from emfabric.builder import build_model
+    from emfabric.sim.builder import build_model
 
     src = {"kind": "loop", "centre": [0.0, 0.02, -0.03], "normal": [1.0, 0.0, 0.2],
            "radius": 0.06, "current": 5e3, **over}
@@ -469,7 +469,7 @@ def test_grid_interpolation_meets_its_tolerance_and_converges():
 
 
 def _grid_model_tol(cells, tol):
-    from emfabric.builder import build_model
+    from emfabric.sim.builder import build_model
 
     m = _grid_model(cells)
     return build_model(m.scenario.replace(**{"field.grid_tolerance": tol}))
@@ -561,7 +561,7 @@ def test_magnet_in_the_run_grid_converges_to_magpylib():
     """The run takes a magnet's field from the grid: second-order convergence to magpylib's
     around the sheet (RMS relative error at random points)."""
     pytest.importorskip("magpylib")
-    from emfabric.builder import build_model
+    from emfabric.sim.builder import build_model
 
     mag = _magnet("cylinder", (0.0, 0.0, 1.2), (0.02, 0.02))
     errs = []

@@ -10,10 +10,10 @@ import time
 import pytest
 import xarray as xr
 
-from emfabric.builder import BYTES_PER_NODE, build_model, memory_available
-from emfabric.integrator import DivergenceError
-from emfabric.runner import run
-from emfabric.scenario import ScenarioError, load_scenario, parse_override
+from emfabric.config.scenario import ScenarioError, load_scenario, parse_override
+from emfabric.integrators import DivergenceError
+from emfabric.runner.loop import run
+from emfabric.sim.builder import BYTES_PER_NODE, build_model, memory_available
 
 SMALL = {"fabric.nodes": [12, 12], "output.snapshot_interval": 5e-6, "projectile.gap": 0.0}
 
@@ -110,7 +110,7 @@ def test_sighup_keeps_a_readable_partial_history(tmp_path):
 def test_a_signal_whose_exception_python_dropped_still_stops_the_run(tmp_path):
     """Python drops an exception raised while it runs a weakref callback or __del__: the
     handler's flag alone must stop the run at the next step, files kept, marked partial."""
-    from emfabric import runner
+    from emfabric.runner import loop as runner
 
     sc = load_scenario("demo-small", {"solver.end_time": 1e-3, "projectile.velocity": [0, 0, 0]})
     steps = []
@@ -186,7 +186,7 @@ def test_full_disk_stops_the_run_naming_the_file(tmp_path, monkeypatch):
     written before stays readable."""
     import errno
 
-    import emfabric.runner as runner
+    import emfabric.runner.loop as runner
 
     real = runner.append_history
     calls = []

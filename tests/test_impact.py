@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from emfabric.runner import run
+from emfabric.runner.loop import run
 
 from conftest import make
 
@@ -132,7 +132,7 @@ def test_default_settings_give_the_converged_spin():
     the peak. On this 40 × 40 version of paper-field, contact.placement = "closest-point" (sticking
     nodes left at the closest point of their free-flight position, lagging the surface) is 21 %
     off."""
-    from emfabric.scenario import load_scenario
+    from emfabric.config.scenario import load_scenario
 
     base = {"fabric.nodes": [40, 40], "solver.end_time": 3e-4}
     default = run(load_scenario("paper-field", base)).history

@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from emfabric.builder import build_model
-from emfabric.integrator import DivergenceError, Integrator, step_factor
-from emfabric.runner import run
-from emfabric.state import initial_state, update_forces
+from emfabric.integrators import DivergenceError, Integrator, step_factor
+from emfabric.runner.loop import run
+from emfabric.sim.builder import build_model
+from emfabric.sim.state import initial_state, update_forces
 
 from conftest import fabric_only
 

@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from emfabric.builder import build_model
-from emfabric.integrator import Integrator
-from emfabric.runner import run
-from emfabric.state import initial_state
+from emfabric.integrators import Integrator
+from emfabric.runner.loop import run
+from emfabric.sim.builder import build_model
+from emfabric.sim.state import initial_state
 
 from conftest import fabric_only
 

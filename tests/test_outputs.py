@@ -10,7 +10,7 @@ import xarray as xr
 
 from emfabric import __version__
 from emfabric.io.history import VARIABLES
-from emfabric.runner import run
+from emfabric.runner.loop import run
 
 from conftest import make
 
@@ -118,7 +118,7 @@ def test_cli_run_validate_scenarios(tmp_path):
 
 def test_history_record_matches_diagnostics(small_run):
     """The compiled history row agrees with the plain diagnostics of the final state."""
-    from emfabric.model import ENERGY_TERMS
+    from emfabric.sim.state import ENERGY_TERMS
 
     res, _ = small_run
     ds, st, m = res.history, res.state, res.model

@@ -13,7 +13,7 @@ import pytest
 import xarray as xr
 from mpl_toolkits.mplot3d import Axes3D
 
-from emfabric import plots
+from emfabric.viz import plots
 
 from conftest import interrupted_demo, run_demo
 
@@ -26,8 +26,8 @@ TINY = {
     "fabric.damage.critical_stretch": 1.001,
     "fabric.damage.rate": 2.0,
 }
-SIMULATOR = ("emfabric.runner", "emfabric.integrator", "emfabric._kernels", "emfabric.builder",
-             "emfabric.model", "emfabric.diagnostics", "numba")
+SIMULATOR = ("emfabric.runner", "emfabric.integrators", "emfabric._kernels",
+             "emfabric.sim", "emfabric.sources", "numba")
 
 
 def tiny_run(out: Path, **overrides) -> Path:
@@ -215,7 +215,7 @@ def test_partial_run_is_drawn_and_says_so(partial_run, tmp_path, caplog):
     """An interrupted run still plots; its titles say partial and a warning is logged."""
     h = plots.open_history(partial_run)
     assert h.attrs["status"] == "partial"
-    with caplog.at_level(logging.WARNING, logger="emfabric.plots"):
+    with caplog.at_level(logging.WARNING, logger="emfabric.viz.plots"):
         files = plots.plot_runs([partial_run], tmp_path)
     assert len(files) == 8
     assert any("partial" in r.getMessage() for r in caplog.records)
@@ -255,7 +255,7 @@ def test_plot_modules_load_without_numba():
         "pkg = types.ModuleType('emfabric')\n"
         "pkg.__path__ = list(spec.submodule_search_locations)\n"
         "sys.modules['emfabric'] = pkg\n"
-        "import emfabric.plots, emfabric.animation\n"
+        "import emfabric.viz.plots, emfabric.viz.animation\n"
         f"bad = [m for m in sys.modules if m.startswith({SIMULATOR!r})]\n"
         "assert not bad, bad\n"
     )
@@ -263,7 +263,7 @@ def test_plot_modules_load_without_numba():
 
 
 def test_package_import_of_plots_loads_no_numba():
-    """`import emfabric.plots` loads no Numba (the package loads the simulator lazily)."""
-    code = "import emfabric.plots, sys; assert 'numba' not in sys.modules"
+    """`import emfabric.viz.plots` loads no Numba (the package loads the simulator lazily)."""
+    code = "import emfabric.viz.plots, sys; assert 'numba' not in sys.modules"
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr

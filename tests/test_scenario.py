@@ -3,7 +3,7 @@
 import pytest
 
 from emfabric import ScenarioError, build_model, builtin_names, load_scenario, scenario_from_dict
-from emfabric.scenario import Scenario, parse_override
+from emfabric.config.scenario import Scenario, parse_override
 
 
 def test_defaults_are_the_papers_section_5():

@@ -8,8 +8,7 @@ import tomllib
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from emfabric.builder import build_model
-from emfabric.scenario import (
+from emfabric.config.scenario import (
     Scenario,
     ScenarioError,
     _model_in,
@@ -18,6 +17,7 @@ from emfabric.scenario import (
     parse_override,
     scenario_from_dict,
 )
+from emfabric.sim.builder import build_model
 
 
 def _keys(model=Scenario, prefix=""):

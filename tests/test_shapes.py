@@ -10,12 +10,12 @@ from numba import njit
 
 from emfabric._kernels.records import SHAPE_CYLINDER, SHAPE_FSP, SHAPE_OGIVE, Body
 from emfabric._kernels.shapes import closest_surface_point
-from emfabric.builder import build_model
-from emfabric.geometry import ShapeGeometry, shape_frame
-from emfabric.integrator import Integrator
-from emfabric.runner import run
-from emfabric.scenario import ScenarioError, load_scenario
-from emfabric.state import initial_state
+from emfabric.config.scenario import ScenarioError, load_scenario
+from emfabric.integrators import Integrator
+from emfabric.runner.loop import run
+from emfabric.sim.builder import build_model
+from emfabric.sim.geometry import ShapeGeometry, shape_frame
+from emfabric.sim.state import initial_state
 
 from conftest import make
 
@@ -353,7 +353,7 @@ def test_outputs_show_the_real_shape(tmp_path):
     from matplotlib.collections import PolyCollection
     from mpl_toolkits.mplot3d import Axes3D
 
-    from emfabric import plots
+    from emfabric.viz import plots
 
     out = tmp_path / "run"
     axis = [math.sin(0.2), 0.0, -math.cos(0.2)]

@@ -11,8 +11,8 @@ import xarray as xr
 
 pytest.importorskip("dask.distributed")
 
-from emfabric.runner import run  # noqa: E402
-from emfabric.study import load_study, sweep  # noqa: E402
+from emfabric.runner.loop import run  # noqa: E402
+from emfabric.studies.sweep import load_study, sweep  # noqa: E402
 
 STUDY = """
 base = "demo-small"
@@ -135,7 +135,7 @@ def test_latin_hypercube_puts_one_sample_in_each_stratum(tmp_path):
 
 
 def test_study_file_errors_say_what(tmp_path):
-    from emfabric.study import StudyError
+    from emfabric.studies.sweep import StudyError
 
     bad = tmp_path / "bad.toml"
     bad.write_text('base = "demo-small"\n[axes]\n"fabric.nodez" = [[4, 4]]\n')
@@ -153,8 +153,8 @@ def test_study_file_errors_say_what(tmp_path):
 def test_estimate_is_eq_5_4_with_the_node_charge():
     """‖B‖ q ‖v‖ μ_s N_c R = 2 I Θ*/δt², N_c = πR²/(ΔxΔy), I = 2/5 m R² for the sphere; the
     field scales with Θ* and 1/δt², inversely with q."""
-    from emfabric.design import estimate
-    from emfabric.scenario import load_scenario
+    from emfabric.config.scenario import load_scenario
+    from emfabric.studies.design import estimate
 
     sc = load_scenario("paper-field", {"fabric.nodes": [41, 41], "fabric.rescale": False,
                                        "fabric.charge_per_node": 0.5})
@@ -180,8 +180,8 @@ def test_estimate_is_eq_5_4_with_the_node_charge():
 
 
 def test_scale_field_scales_every_source_linearly():
-    from emfabric.design import field_at_centre, scale_field
-    from emfabric.scenario import load_scenario
+    from emfabric.config.scenario import load_scenario
+    from emfabric.sources.scaling import field_at_centre, scale_field
 
     sc = load_scenario("coil-pulse")
     b1 = np.array(field_at_centre(sc, 2e-4))
@@ -213,7 +213,7 @@ def test_design_field_brackets_the_target_tilt(tmp_path):
 # --- ballistic limit --------------------------------------------------------------------------
 
 def test_lambert_jonas_fit_recovers_known_parameters():
-    from emfabric.ballistic import fit_lambert_jonas, lambert_jonas
+    from emfabric.studies.ballistic import fit_lambert_jonas, lambert_jonas
 
     rng = np.random.default_rng(4)
     a, p, vbl = 0.85, 2.4, 180.0
@@ -227,7 +227,7 @@ def test_lambert_jonas_fit_recovers_known_parameters():
 
 
 def test_logistic_v50_fit_recovers_a_known_v50():
-    from emfabric.ballistic import fit_v50
+    from emfabric.studies.ballistic import fit_v50
 
     rng = np.random.default_rng(9)
     v50, s = 210.0, 6.0

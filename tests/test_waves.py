@@ -4,9 +4,9 @@ import math
 
 import numpy as np
 
-from emfabric.builder import build_model
-from emfabric.integrator import Integrator
-from emfabric.state import initial_state, update_forces
+from emfabric.integrators import Integrator
+from emfabric.sim.builder import build_model
+from emfabric.sim.state import initial_state, update_forces
 
 from conftest import fabric_only
 

@@ -13,7 +13,7 @@ try:
 except PackageNotFoundError:  # running from a source tree without installation
     __version__ = "0.0.0+unknown"
 
-from emfabric.scenario import (
+from emfabric.config.scenario import (
     Scenario,
     ScenarioError,
     builtin_names,
@@ -23,16 +23,16 @@ from emfabric.scenario import (
 
 # the simulator (Numba kernels) loads on first use, so that plotting never imports it
 _LAZY = {
-    "build_model": "emfabric.builder",
-    "DivergenceError": "emfabric.integrator",
-    "Integrator": "emfabric.integrator",
-    "StepInfo": "emfabric.integrator",
-    "Model": "emfabric.model",
-    "State": "emfabric.model",
-    "RunResult": "emfabric.runner",
-    "run": "emfabric.runner",
-    "resume": "emfabric.runner",
-    "initial_state": "emfabric.state",
+    "build_model": "emfabric.sim.builder",
+    "DivergenceError": "emfabric.integrators.phi",
+    "Integrator": "emfabric.integrators.phi",
+    "StepInfo": "emfabric.integrators.phi",
+    "Model": "emfabric.sim.model",
+    "State": "emfabric.sim.state",
+    "RunResult": "emfabric.runner.loop",
+    "run": "emfabric.runner.loop",
+    "resume": "emfabric.runner.loop",
+    "initial_state": "emfabric.sim.state",
 }
 
 

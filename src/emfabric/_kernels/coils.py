@@ -21,7 +21,7 @@ I(t) and the induced electric field is −(dI/dt) A_φ φ̂.
 
 import math
 
-from numba import njit
+from numba import njit, prange
 
 MU0 = 4e-7 * math.pi
 """Vacuum permeability [T m/A] (the SI value before 2019; the 2019 value differs by 5e-10)."""
@@ -156,3 +156,31 @@ def loop_vectors(lp, x):
     return ((b_rho * ux + b_ax * nx, b_rho * uy + b_ax * ny, b_rho * uz + b_ax * nz),
             (a_phi * (ny * uz - nz * uy), a_phi * (nz * ux - nx * uz),
              a_phi * (nx * uy - ny * ux)))
+
+
+@njit(cache=True)
+def point_values(loops, group_of, x, out):
+    """out (groups, 6) = each group's b and a at the point x, summed over its loops in their
+    order. A call of its own: inlined into the parallel loop below, Numba's array analysis
+    failed on the tuples."""
+    out[:, :] = 0.0
+    for m in range(loops.shape[0]):
+        bu, au = loop_vectors(loops[m], x)
+        o = out[group_of[m]]
+        for c in range(3):
+            o[c] += bu[c]
+            o[3 + c] += au[c]
+
+
+@njit(cache=True, parallel=True)
+def loop_values_on_grid(loops, group_of, origin, step, shape, offset, out):
+    """Each group's b [T per unit waveform] and a [T m] at the points origin + (index +
+    offset)·step (offset a 3-vector): out (groups, *shape, 6)."""
+    nx, ny, nz = shape[0], shape[1], shape[2]
+    for i in prange(nx):
+        px = origin[0] + (i + offset[0]) * step[0]
+        for j in range(ny):
+            py = origin[1] + (j + offset[1]) * step[1]
+            for k in range(nz):
+                pz = origin[2] + (k + offset[2]) * step[2]
+                point_values(loops, group_of, (px, py, pz), out[:, i, j, k])

@@ -110,6 +110,36 @@ def fabric_diagnostics(phys, x, v, alpha, centre, direction, out):
     out[RECEDE_MAX] = recede
 
 
+@njit(cache=True, inline="always")
+def _body_energy(body, b_state):
+    """The body's angular momentum about its centre (inertial frame) [kg m² s⁻¹] and its
+    translational and rotational kinetic energy [J] (zeros without a body)."""
+    rot = b_state[BODY_R0:BODY_R0 + 3]
+    v = vec(b_state[BODY_V])
+    w = vec(b_state[BODY_W])
+    if not body.active:
+        return (0.0, 0.0, 0.0), 0.0, 0.0
+    h = world_inertia_times(rot, body.inertia, w)
+    return h, 0.5 * body.mass * dot(v, v), 0.5 * dot(w, h)
+
+
+@njit(cache=True, inline="always")
+def _total_energy(ke_t, ke_r, diag, energy):
+    """Kinetic + strain energy + dissipated − work so far [J] (the energy balance's total; the
+    terms of energy in the order of records.ENERGY_TERMS)."""
+    return (ke_t + ke_r + diag[KE] + diag[STRAIN] + energy[2] + energy[3] + energy[4]
+            + energy[5] - energy[0] - energy[1])
+
+
+@njit(cache=True)
+def total_energy(phys, x, v, alpha, b_state, energy, centre, direction):
+    """The total energy of a state (_total_energy) without a history record [J]."""
+    diag = np.empty(COUNT)
+    fabric_diagnostics(phys, x, v, alpha, centre, direction, diag)
+    _h, ke_t, ke_r = _body_energy(phys.body, b_state)
+    return _total_energy(ke_t, ke_r, diag, energy)
+
+
 @njit(cache=True)
 def history_row(t, dt, iterations, error, rejected, evaluations, contacts, b_state, body, diag,
                 energy, e_initial, contact_force, row):
@@ -123,21 +153,17 @@ def history_row(t, dt, iterations, error, rejected, evaluations, contacts, b_sta
     w = vec(b_state[BODY_W])
     has_body = body.active
     b_mass = body.mass
-    inertia_body = body.inertia
     nose_body = body.nose
     nose = mat_vec(rot, nose_body)
     zero = (0.0, 0.0, 0.0)
-    h = world_inertia_times(rot, inertia_body, w) if has_body else zero
+    h, ke_t, ke_r = _body_energy(body, b_state)
     p = (b_mass * v[0], b_mass * v[1], b_mass * v[2]) if has_body else zero
-    ke_r = 0.5 * dot(w, h) if has_body else 0.0
-    ke_t = 0.5 * b_mass * dot(v, v) if has_body else 0.0
     xp = cross(x, p)
     ang = (xp[0] + h[0], xp[1] + h[1], xp[2] + h[2])
     # tilt, eq. 5.2, in atan2 form (accurate at small angles)
     tilt = tilt_angle(rot, nose_body) if has_body else 0.0
     yaw = yaw_angle(rot, nose_body, v) if has_body else 0.0
-    total = (ke_t + ke_r + diag[KE] + diag[STRAIN] + energy[2] + energy[3] + energy[4]
-             + energy[5] - energy[0] - energy[1])
+    total = _total_energy(ke_t, ke_r, diag, energy)
     e0 = total if math.isnan(e_initial) else e_initial
     row[0] = t
     row[1] = dt

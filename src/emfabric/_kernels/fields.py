@@ -398,3 +398,13 @@ def node_field(fld, nf, n, x, t):
     if with_sources(fld):
         return (nf[0, n], nf[1, n], nf[2, n]), (nf[3, n], nf[4, n], nf[5, n])
     return field_at(fld, x, t)
+
+
+@njit(cache=True)
+def fields_at_points(fld, points, t, e, b):
+    """e, b (N, 3) = field_at at each of the points (N, 3) [m] and time t [s]."""
+    for k in range(points.shape[0]):
+        ek, bk = field_at(fld, (points[k, 0], points[k, 1], points[k, 2]), t)
+        for c in range(3):
+            e[k, c] = ek[c]
+            b[k, c] = bk[c]

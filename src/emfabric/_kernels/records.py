@@ -1,6 +1,6 @@
 """The named records the kernels take whole (NamedTuples: Numba compiles their fields by name).
 
-A Model is a composition of these records (built by emfabric.builder), a State's arrays are a
+A Model is a composition of these records (built by emfabric.sim.builder), a State's arrays are a
 ``StateArrays``; a kernel reads ``fld.B`` or ``body.radius``, never a loose positional scalar.
 Adding a field to a record changes the kernels' signatures, so nothing else needs to change for
 the compiled code to see it. Units are SI throughout.
@@ -108,7 +108,7 @@ class Field(NamedTuple):
     map_has_e: bool = False
     """Whether the map holds a non-zero E anywhere."""
     grid_values: np.ndarray | None = None
-    """The source grid (emfabric.source_grid): per group of sources with one waveform, the
+    """The source grid (emfabric.sources.grid): per group of sources with one waveform, the
     field per unit of the waveform at the grid points, (groups, nz + 1, ny + 1, nx + 1, 6):
     b [T] and the vector potential a [T m] (the induced E is −(dw/dt) a); None without a grid
     (then Numba compiles the lookup away)."""

@@ -1,1 +1,5 @@
-"""Output files: history (netCDF), snapshots (netCDF + ParaView VTU/PVD)."""
+"""Files: history.nc (netCDF, CF-style), snapshots.nc and the ParaView files, the checkpoint,
+atomic writes, the netCDF helpers, and the rules of an output folder.
+
+May import: sim, config. Stores what sim.diagnostics computes; computes no physics.
+"""

@@ -16,9 +16,10 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
+from emfabric.config.scenario import Scenario, ScenarioError, scenario_from_dict
 from emfabric.io.netcdf import write_netcdf
-from emfabric.model import Model, State
-from emfabric.scenario import Scenario, ScenarioError, scenario_from_dict
+from emfabric.sim.model import Model
+from emfabric.sim.state import State
 
 CHECKPOINT = "checkpoint.nc"
 FORMAT = 2  # 2: the State holds node_e

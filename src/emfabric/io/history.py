@@ -8,7 +8,6 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from emfabric.diagnostics import COLUMNS, LAYOUT, RECORD
 from emfabric.io.netcdf import (
     CONVENTIONS,
     REFERENCES,
@@ -18,7 +17,8 @@ from emfabric.io.netcdf import (
     write_netcdf,
     xyz_coordinate,
 )
-from emfabric.model import Model
+from emfabric.sim.diagnostics import COLUMNS, LAYOUT, RECORD
+from emfabric.sim.model import Model
 
 VARIABLES = RECORD
 INTEGER_VARIABLES = ("iterations", "rejected_steps", "force_evaluations", "contact_nodes",
@@ -28,7 +28,7 @@ INTEGER_VARIABLES = ("iterations", "rejected_steps", "force_evaluations", "conta
 
 
 class Recorder:
-    """Stores history records (rows filled by emfabric.diagnostics.measure) in a growing array
+    """Stores history records (rows filled by emfabric.sim.diagnostics.measure) in a growing array
     (amortised O(1) append); computes nothing."""
 
     def __init__(self, rows: np.ndarray | None = None) -> None:
@@ -75,17 +75,18 @@ def run_attributes(model: Model, status: str, end_reason: str, wall: float) -> d
     from emfabric import __version__
 
     sc = model.scenario
+    name = sc.name if sc is not None else "model built in Python"
     return {
-        "title": f"emfabric run of scenario {sc.name!r}",
+        "title": f"emfabric run of scenario {name!r}",
         "Conventions": CONVENTIONS,
         "source": f"emfabric {__version__} (yarn-network impact simulation)",
         "references": REFERENCES,
         "emfabric_version": __version__,
-        "scenario_name": sc.name,
-        "fabric_reference": fabric_reference(sc),
+        "scenario_name": name,
+        "fabric_reference": fabric_reference(sc) if sc is not None else "",
         "has_projectile": int(model.has_body),
         "projectile_radius": model.body.radius if model.has_body else 0.0,
-        "scenario": sc.to_toml(),
+        "scenario": sc.to_toml() if sc is not None else "",
         "status": status,
         "end_reason": end_reason,
         "wall_time_s": f"{wall:.3f}",

@@ -6,7 +6,7 @@ import shutil
 from pathlib import Path
 
 RUN_FILES = ("history.nc", "snapshots.nc", "checkpoint.nc", "fabric.pvd", "projectile.pvd")
-"""Files of a run (emfabric.runner)."""
+"""Files of a run (emfabric.runner.loop)."""
 RUN_FOLDERS = ("vtk", "figures")
 """Folders of a run: ParaView pieces, and the figures `plot` draws."""
 

@@ -22,7 +22,8 @@ from emfabric.io.netcdf import (
     write_netcdf,
     xyz_coordinate,
 )
-from emfabric.model import Model, State
+from emfabric.sim.model import Model
+from emfabric.sim.state import State
 
 
 class Snapshots:
@@ -95,7 +96,7 @@ class Snapshots:
             },
             attrs={**attrs, "grid_nx": m.nx, "grid_ny": m.ny,
                    "projectile_radius": m.body.radius if m.has_body else 0.0,
-                   "projectile_shape": m.scenario.projectile.shape,
+                   "projectile_shape": m.projectile_shape,
                    "projectile_size": m.geometry.bound if m.has_body else 0.0,
                    "has_projectile": int(m.has_body)},
         )

@@ -7,29 +7,26 @@ import os
 
 import numpy as np
 
-from emfabric._kernels.coils import WAVE_CONSTANT, WAVE_DAMPED_SINE, WAVE_RAMP, WAVE_TABLE
 from emfabric._kernels.records import (
     BODY_R0,
     BODY_ROWS,
     BODY_X,
     MATERIAL_FUNG,
     MATERIAL_KSV,
-    REGION_HALF_SPACE,
-    REGION_UNIFORM,
     SHAPE_SPHERE,
     Body,
     Contact,
-    Field,
     Material,
     Nodes,
     Physics,
     Yarns,
 )
 from emfabric._kernels.shapes import SHAPES
-from emfabric.geometry import geometry_of, shape_frame
-from emfabric.model import Model
-from emfabric.scenario import Scenario, ScenarioError
-from emfabric.source_grid import build_source_grid
+from emfabric.config.scenario import Scenario, ScenarioError
+from emfabric.sim.geometry import initial_pose
+from emfabric.sim.model import Model, Options
+from emfabric.sources.build import build_field, nodes_outside_map
+from emfabric.sources.grid import build_source_grid
 
 log = logging.getLogger(__name__)
 
@@ -127,35 +124,8 @@ def build_model(scenario: Scenario) -> Model:
 
     pr = scenario.projectile
     has_body = pr.shape in SHAPES
-    geo = geometry_of(pr)
-    body_v0 = np.asarray(pr.velocity, dtype=float)
-    speed = np.linalg.norm(body_v0)
-    flight = body_v0 / speed if speed > 0 else np.array([0.0, 0.0, -1.0])
-    # the nose: the shape's axis at t = 0 (default: the flight direction); its leading surface
-    # point is the tilt and yaw marker (5.2)
-    lead = flight
-    if pr.axis is not None:
-        axis = np.asarray(pr.axis, dtype=float)
-        length = float(np.linalg.norm(axis))
-        if not length > 0.0:
-            raise ScenarioError(f"projectile.axis = {list(pr.axis)}: the nose direction must "
-                                f"be a non-zero vector")
-        lead = axis / length
-    # the body frame is the world frame at t = 0; the shape frame has e3 along the nose
-    frame = np.eye(3) if geo.kind == "sphere" else shape_frame(lead)
-    moments = (geo.principal_inertia(pr.mass) if pr.principal_inertia is None
-               else np.asarray(pr.principal_inertia, dtype=float))
-    inertia = frame.T @ np.diag(moments) @ frame
-    if geo.kind == "sphere":
-        nose = geo.radius * lead
-        lowest = geo.radius
-    else:
-        nose = (geo.length - geo.base) * lead
-        lowest = geo.extent(frame @ np.array([0.0, 0.0, -1.0]))
-    if pr.position is None:
-        body_x0 = np.array([0.0, 0.0, lowest + pr.gap])
-    else:
-        body_x0 = np.asarray(pr.position, dtype=float)
+    pose = initial_pose(pr)
+    geo, frame = pose.geometry, pose.frame
     charge_pos = np.array([c.position for c in pr.charges], dtype=float).reshape(-1, 3)
     charge_q = np.array([c.charge for c in pr.charges], dtype=float)
     segments = scenario.contact.segments
@@ -186,10 +156,10 @@ def build_model(scenario: Scenario) -> Model:
             shape=SHAPES.get(pr.shape, SHAPE_SPHERE),  # "none": no body, shape unused
             radius=float(geo.radius),
             mass=float(pr.mass),
-            inertia=inertia,
+            inertia=pose.inertia,
             charge_pos=charge_pos,
             charge=charge_q,
-            nose=nose,
+            nose=pose.nose,
             length=float(geo.length),
             nose_length=float(geo.nose_length),
             base=float(geo.base),
@@ -205,16 +175,18 @@ def build_model(scenario: Scenario) -> Model:
                         scenario.contact.placement == "phi-update"),
     )
     model = Model(
-        scenario=scenario,
         physics=physics,
+        options=Options.of(scenario),
         geometry=geo,
-        flight_direction=flight,
-        body_x0=body_x0,
-        body_v0=body_v0,
-        body_w0=np.asarray(pr.angular_velocity, dtype=float),
+        flight_direction=pose.flight_direction,
+        body_x0=pose.position,
+        body_v0=pose.velocity,
+        body_w0=pose.angular_velocity,
         node_v0=node_v0,
+        projectile_shape=pr.shape,
+        scenario=scenario,
     )
-    check_geometry(model)
+    check_geometry(model, pr)
     check_stability(model)
     outside = nodes_outside_map(model.field, node_x0)
     if outside:
@@ -223,149 +195,7 @@ def build_model(scenario: Scenario) -> Model:
     return model
 
 
-SOLENOID_MAX_LOOPS = 200
-"""A solenoid of more turns is this many loops, each carrying current × turns / loops."""
-WIRE_FRACTION = 0.01
-"""Default wire radius of a loop or solenoid, as a fraction of its radius."""
-
-
-def build_field(scenario: Scenario) -> Field:
-    """The Field record of a scenario: the uniform part (field.E, field.B and the "uniform"
-    sources, summed) and the current loops (a solenoid is a row of loops), each with its
-    waveform. Needs no fabric (``emfabric field`` uses it alone)."""
-    fld = scenario.field
-    e = np.asarray(fld.E, dtype=float)
-    b = np.asarray(fld.B, dtype=float)
-    loops, waves, tables = [], [], []
-    field_map = None
-    magnets: list[list[float]] = []
-    kinds = {"constant": WAVE_CONSTANT, "ramp": WAVE_RAMP, "damped-sine": WAVE_DAMPED_SINE,
-             "table": WAVE_TABLE}
-    for i, src in enumerate(fld.sources):
-        if src.kind == "uniform":
-            e = e + np.asarray(src.E, dtype=float)
-            b = b + np.asarray(src.B, dtype=float)
-            continue
-        if src.kind == "magnet":
-            from emfabric.source_grid import import_magpylib
-            try:
-                import_magpylib()
-            except ImportError as err:
-                raise ScenarioError(f"field.sources[{i}].kind = \"magnet\": {err}") from None
-            magnets.append([0.0 if src.shape == "cuboid" else 1.0, *src.polarization,
-                            *(list(src.dimension) + [0.0])[:3], *src.position,
-                            *np.radians(np.asarray(src.orientation, dtype=float))])
-            continue
-        if src.kind == "map":
-            if field_map is not None:
-                raise ScenarioError(f"field.sources[{i}]: a second field map; allowed: one "
-                                    f"source of kind \"map\" (sum the maps into one file)")
-            field_map = read_field_map(src.file, src.scale, f"field.sources[{i}].file")
-            continue
-        direction = np.asarray(src.normal if src.kind == "loop" else src.axis, dtype=float)
-        size = float(np.linalg.norm(direction))
-        if not size > 0.0:
-            key = "normal" if src.kind == "loop" else "axis"
-            raise ScenarioError(f"field.sources[{i}].{key} = {list(direction)}: allowed: a "
-                                f"non-zero vector")
-        n = direction / size
-        wire = src.wire_radius if src.wire_radius is not None else WIRE_FRACTION * src.radius
-        if src.kind == "loop":
-            centres, per_loop = [np.asarray(src.centre, dtype=float)], float(src.turns)
-        else:
-            count = min(src.turns, SOLENOID_MAX_LOOPS)
-            offsets = (np.arange(count) + 0.5) / count - 0.5
-            centres = [np.asarray(src.centre, dtype=float) + o * src.length * n
-                       for o in offsets]
-            per_loop = src.turns / count
-        amp = per_loop * (src.current if src.current is not None else 1.0)
-        wave = [kinds[src.waveform], amp, src.start_time, src.rise_time or 0.0,
-                src.frequency or 0.0, src.decay_time or 1.0]
-        table = np.asarray(src.table if src.table is not None else [(0.0, 0.0)], dtype=float)
-        for c in centres:
-            loops.append([*c, *n, src.radius, wire])
-            waves.append(wave)
-            tables.append(table)
-    width = max((len(tb) for tb in tables), default=1)
-    padded = np.zeros((len(tables), width, 2))
-    for k, tb in enumerate(tables):
-        padded[k, :len(tb)] = tb
-    return Field(
-        E=e,
-        B=b,
-        region=REGION_UNIFORM if fld.region == "uniform" else REGION_HALF_SPACE,
-        z0=float(fld.z0),
-        gravity=np.asarray(fld.gravity, dtype=float),
-        loops=np.asarray(loops, dtype=float).reshape(-1, 8) if loops else None,
-        currents=np.asarray(waves, dtype=float).reshape(-1, 6),
-        tables=padded,
-        table_len=np.array([len(tb) for tb in tables], dtype=np.int64),
-        magnets=np.asarray(magnets, dtype=float).reshape(-1, 13),
-        **({} if field_map is None else field_map),
-    )
-
-
-def read_field_map(path: str, scale: float, key: str) -> dict:
-    """The map_axes, map_size and map_values of a Field record from a netCDF field map
-    (coordinates x, y, z [m], increasing; Bx, By, Bz [T], optional Ex, Ey, Ez [V/m]), times
-    `scale`. Errors name the key, the file and what is wrong."""
-    import xarray as xr
-
-    try:
-        ds = xr.open_dataset(path)
-    except (OSError, ValueError) as err:
-        raise ScenarioError(f"{key} = {path!r}: cannot be read as netCDF ({err}); allowed: a "
-                            f"netCDF file with coordinates x, y, z and variables Bx, By, Bz") \
-            from None
-    with ds:
-        axes = []
-        for name in "xyz":
-            if name not in ds.variables or ds[name].ndim != 1:
-                raise ScenarioError(f"{key} = {path!r}: no one-dimensional coordinate {name!r}")
-            a = np.asarray(ds[name].values, dtype=float)
-            if a.size < 2 or not np.all(np.isfinite(a)) or np.any(np.diff(a) <= 0):
-                raise ScenarioError(f"{key} = {path!r}: coordinate {name!r} must hold at least "
-                                    f"two finite, increasing values [m]")
-            axes.append(a)
-        values = np.zeros((axes[0].size, axes[1].size, axes[2].size, 6))
-        for c, name in enumerate(("Ex", "Ey", "Ez", "Bx", "By", "Bz")):
-            if name not in ds.variables:
-                if name.startswith("B"):
-                    raise ScenarioError(f"{key} = {path!r}: variable {name!r} is missing "
-                                        f"(B in T on the grid x, y, z)")
-                continue
-            var = ds[name]
-            if set(var.dims) != {"x", "y", "z"}:
-                raise ScenarioError(f"{key} = {path!r}: {name} has dimensions {var.dims}; "
-                                    f"allowed: x, y, z")
-            v = np.asarray(var.transpose("x", "y", "z").values, dtype=float)
-            if not np.all(np.isfinite(v)):
-                raise ScenarioError(f"{key} = {path!r}: {name} holds non-finite values")
-            values[..., c] = scale * v
-    width = max(a.size for a in axes)
-    padded = np.zeros((3, width))
-    for c, a in enumerate(axes):
-        padded[c, :a.size] = a
-    steps = np.array([(a[-1] - a[0]) / (a.size - 1)
-                      if np.allclose(np.diff(a), (a[-1] - a[0]) / (a.size - 1), rtol=1e-9, atol=0)
-                      else 0.0 for a in axes])
-    return {"map_axes": padded, "map_size": np.array([a.size for a in axes], dtype=np.int64),
-            "map_step": steps,
-            "map_values": values, "map_has_e": bool(np.any(values[..., :3] != 0.0))}
-
-
-def nodes_outside_map(fld: Field, points: np.ndarray) -> int:
-    """How many of the points (3, N) lie outside the field map's box (0 without a map)."""
-    if fld.map_axes is None:
-        return 0
-    inside = np.ones(points.shape[1], dtype=bool)
-    for c in range(3):
-        grid = fld.map_axes[c, :fld.map_size[c]]
-        inside &= (points[c] >= grid[0]) & (points[c] <= grid[-1])
-    return int((~inside).sum())
-
-
-def check_geometry(model: Model) -> None:
+def check_geometry(model: Model, projectile) -> None:
     """Refuse a projectile that overlaps the fabric at t = 0 (it would start inside the sheet
     and create energy from nothing): a node inside the body, or the sheet's plane cutting the
     body within the sheet's extent."""
@@ -391,7 +221,7 @@ def check_geometry(model: Model) -> None:
                  and x0[0].min() - reach < c[0] < x0[0].max() + reach
                  and x0[1].min() - reach < c[1] < x0[1].max() + reach)
     if inside or plane_cut:
-        sc = model.scenario.projectile
+        sc = projectile
         where = (f"projectile.position = {list(sc.position)}" if sc.position is not None else
                  f"projectile.gap = {sc.gap}")
         raise ScenarioError(
@@ -410,7 +240,7 @@ def check_stability(model: Model) -> None:
     """Refuse a φ < 1/2 scheme whose dt_max exceeds the network's stability limit (the scheme is
     only conditionally stable there and nothing iterates to notice): Δt ≤ 2/(ω_max √(1 − 2φ))
     with ω_max² = 8·k_max/m_min, k the yarn stiffness 𝔼A0/L0 at rest times STABILITY_MARGIN."""
-    solver = model.scenario.solver
+    solver = model.options
     if solver.phi >= 0.5:
         return
     free = model.nodes.inv_mass > 0

@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
-from emfabric.scenario import (
+from emfabric.config.scenario import (
     Scenario,
     ScenarioError,
     apply_overrides,
@@ -193,8 +193,7 @@ def run_case(text: str, out: str | None, threads: int) -> dict[str, Any]:
     run that diverges or fails: the status and message say so). Called on a Dask worker."""
     import numba
 
-    from emfabric.integrator import DivergenceError
-    from emfabric.runner import run
+    from emfabric.runner import DivergenceError, run
 
     numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
     t0 = time.perf_counter()
@@ -220,49 +219,21 @@ def _failed(message: str, wall: float) -> dict[str, Any]:
 
 
 def metrics_of(result) -> dict[str, Any]:
-    """The METRICS of a finished (or diverged) run."""
-    ds = result.history
-    out: dict[str, Any] = {
-        "status": result.status,
-        "wall_time": float(result.wall_time),
-        "broken_yarns": int(ds["broken_yarns"][-1]),
-        "max_deflection": float(ds["max_deflection"].max()),
+    """The METRICS of a finished (or diverged) run: the run summary's figures under the
+    study's names (emfabric.runner.summary)."""
+    s = result.summary
+    return {
+        "status": s["status"],
+        "wall_time": s["wall_time_s"],
+        "broken_yarns": s["broken_yarns"],
+        "max_deflection": s["max_deflection_m"],
+        "perforated": s["perforated"],
+        "residual_speed": s["residual_speed_m_s"],
+        "max_tilt": s["max_tilt_rad"],
+        "max_yaw": s["max_yaw_rad"],
+        "final_angular_velocity": s["final_omega_rad_s"],
+        "energy_absorbed": s["energy_absorbed_J"],
     }
-    if "projectile_velocity" in ds:
-        v = ds["projectile_velocity"][-1].values
-        v0 = ds["projectile_velocity"][0].values
-        d = v0 / max(float(np.linalg.norm(v0)), 1e-300)
-        forward = float(v @ d)
-        # how far the centre is past the sheet's plane (z = 0), along the flight
-        past = float(ds["projectile_position"][-1].values @ d)
-        clear = past > float(result.model.geometry.bound)
-        touching = int(ds["contact_nodes"][-1]) > 0
-        # perforation: the run ended so, or at end_time moving forward, clear of the sheet's
-        # plane and of the fabric; rebound, never touched, or moving back: not; still in
-        # contact and moving on at end_time, diverged, failed: unknown (-1)
-        if result.status not in ("complete", "partial"):
-            out["perforated"] = -1
-        elif result.end_reason == "perforation":
-            out["perforated"] = 1
-        elif result.end_reason in ("rebound", "never touched") or forward <= 0.0:
-            out["perforated"] = 0
-        elif clear and not touching:
-            out["perforated"] = 1
-        elif not clear and not touching and int(ds["contact_nodes"].max()) == 0:
-            out["perforated"] = 0  # has not reached the sheet yet
-        else:
-            out["perforated"] = -1
-        ke = ds["kinetic_energy_projectile"].values
-        out.update(residual_speed=float(np.linalg.norm(v)),
-                   max_tilt=float(ds["tilt"].max()),
-                   max_yaw=float(ds["yaw"].max()) if "yaw" in ds else math.nan,
-                   final_angular_velocity=[float(c) for c in ds["angular_velocity"][-1].values],
-                   energy_absorbed=float(ke[0] - ke[-1]))
-    else:
-        out["perforated"] = -1
-        out.update(residual_speed=math.nan, max_tilt=math.nan, max_yaw=math.nan,
-                   final_angular_velocity=[math.nan] * 3, energy_absorbed=math.nan)
-    return out
 
 
 # --- running a study ------------------------------------------------------------------------

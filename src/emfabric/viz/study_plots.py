@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 import xarray as xr
 
-from emfabric.plots import new_figure, save_figure
+from emfabric.viz.plots import new_figure, save_figure
 
 PLOTTED = ("residual_speed", "max_tilt", "max_yaw", "final_angular_velocity",
            "energy_absorbed", "broken_yarns", "max_deflection", "perforated", "wall_time")
@@ -116,7 +116,7 @@ def design_figure(res: dict[str, Any], path: str | Path) -> Path:
 
 def ballistic_figure(res: dict[str, Any], path: str | Path, lambert_jonas) -> Path:
     """Residual against striking speed with the Lambert–Jonas fit (the curve function given:
-    emfabric.ballistic.lambert_jonas); with seeds, the perforation probability with the
+    emfabric.studies.ballistic.lambert_jonas); with seeds, the perforation probability with the
     logistic fit beside it."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -1,5 +1,5 @@
 """The command-line application object and its output helpers, shared by the command modules
-(emfabric.cli: run, validate, scenarios; emfabric.cli_plot: plot, animate)."""
+(emfabric.cli: run, validate, scenarios; emfabric.cli.plot: plot, animate)."""
 
 from __future__ import annotations
 
@@ -65,7 +65,7 @@ def show_messages() -> None:
 
 def load_or_exit(scenario: str, overrides: list[str] | None):
     """The scenario with its --set overrides, or a clear error and exit status 2."""
-    from emfabric.scenario import ScenarioError, load_scenario, parse_override
+    from emfabric.config.scenario import ScenarioError, load_scenario, parse_override
 
     try:
         pairs = dict(parse_override(o) for o in (overrides or []))

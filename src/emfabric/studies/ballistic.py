@@ -4,8 +4,8 @@ of the residual speeds above it, and V50 with its spread from seeded shots
 
 A shot perforates when its run ends by perforation (the projectile past every node, moving
 away), or reaches `end_time` moving forward past the sheet's plane and clear of the fabric
-(study.metrics_of); a shot still in contact at end_time has not perforated *within end_time*:
-V_BL is the lowest speed that perforates within the scenario's end_time (the shipped
+(emfabric.runner.summary.perforated); a shot still in contact at end_time has not perforated
+*within end_time*: V_BL is the lowest speed that perforates within the scenario's end_time (the shipped
 ``rupture`` scenario runs 3 ms, long enough for a stopped sphere to rebound).
 
 Lambert–Jonas: v_r = a (v_s^p − V_BL^p)^{1/p} for v_s > V_BL, 0 below (SciPy least squares).
@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from emfabric.scenario import Scenario
+from emfabric.config.scenario import Scenario
 
 SPEEDS_ABOVE = (1.05, 1.1, 1.2, 1.35, 1.5, 1.75, 2.0)
 """Striking speeds above V_BL run for the Lambert–Jonas fit, as multiples of V_BL."""
@@ -93,14 +93,14 @@ def shot(scenario: Scenario, speed: float, seed: int | None = None,
          jitter: tuple[float, float] = (0.0, 0.0)) -> Scenario:
     """The scenario at the striking speed (along its velocity), with a modulus seed and the
     impact point moved by `jitter` in the sheet's plane."""
-    from emfabric.builder import build_model
+    from emfabric.sim.geometry import initial_pose
 
     v = np.asarray(scenario.projectile.velocity, dtype=float)
     over: dict[str, Any] = {"projectile.velocity": list(speed * v / np.linalg.norm(v))}
     if seed is not None:
         over["fabric.material.seed"] = int(seed)
     if jitter != (0.0, 0.0):
-        x0 = build_model(scenario).body_x0
+        x0 = initial_pose(scenario.projectile).position
         over["projectile.position"] = [float(x0[0] + jitter[0]), float(x0[1] + jitter[1]),
                                        float(x0[2])]
     return scenario.replace(**over)
@@ -112,7 +112,7 @@ def ballistic_limit(scenario: Scenario, out, *, seeds: int = 0, tolerance: float
                     progress=None) -> dict[str, Any]:
     """V_BL (bracket and bisect to `tolerance` m/s), the Lambert–Jonas fit above it, and with
     `seeds`, V50. Every shot is a stored case in out/cases (a rerun reuses them)."""
-    from emfabric.study import Case, StudyError, case_key, connect, read_case, run_cases
+    from emfabric.studies.sweep import Case, StudyError, case_key, connect, read_case, run_cases
 
     out = Path(out)
     v = np.asarray(scenario.projectile.velocity, dtype=float)
@@ -256,7 +256,7 @@ def write_outputs(res: dict[str, Any], out: Path) -> list[Path]:
               "v_bl": res["v_bl"], "lambert_jonas": json.dumps(res["lambert_jonas"]),
               "v50": json.dumps(res.get("v50"))})
     write_netcdf(ds, out / "ballistic.nc")
-    from emfabric.study_plots import ballistic_figure
+    from emfabric.viz.study_plots import ballistic_figure
 
     figure = ballistic_figure(res, out / "ballistic.png", lambert_jonas)
     return [out / "ballistic.json", out / "ballistic.nc", figure]

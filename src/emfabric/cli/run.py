@@ -1,10 +1,9 @@
-"""Command line: ``emfabric run | validate | new | scenarios | plot | animate``."""
+"""The run commands: ``emfabric run | validate | new | scenarios``."""
 
 from __future__ import annotations
 
 import json
 import signal
-import sys
 import time
 from pathlib import Path
 from typing import Annotated
@@ -14,7 +13,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
-from emfabric.cli_app import (
+from emfabric.cli.app import (
     app,
     console,
     emit,
@@ -23,7 +22,7 @@ from emfabric.cli_app import (
     out_console,
     show_messages,
 )
-from emfabric.scenario import (
+from emfabric.config.scenario import (
     ScenarioError,
     apply_overrides,
     builtin_names,
@@ -54,8 +53,8 @@ def run(
 ) -> None:
     """Run a scenario; write history.nc, snapshots, ParaView files and a checkpoint into the output folder as the run goes (--resume DIR continues a stopped run)."""  # noqa: E501
     from emfabric.io.checkpoint import CHECKPOINT, CheckpointError, read_checkpoint
-    from emfabric.runner import resume as resume_run
-    from emfabric.runner import run as run_scenario
+    from emfabric.runner.loop import resume as resume_run
+    from emfabric.runner.loop import run as run_scenario
 
     if resume is not None:
         if out is not None and out.resolve() != resume.resolve():
@@ -102,7 +101,7 @@ def run(
             return run_scenario(sc, out_dir, progress=progress_fn)
     show_messages()
     # Ctrl-C, SIGTERM and a closed terminal (SIGHUP) all stop the run with its files kept
-    from emfabric.runner import interrupt
+    from emfabric.runner.loop import interrupt
     for name in ("SIGINT", "SIGTERM", "SIGHUP"):
         if hasattr(signal, name):
             signal.signal(getattr(signal, name), interrupt)
@@ -153,7 +152,7 @@ def run(
         raise typer.Exit(1)
     _print_summary(result, json_summary)
     if plot:
-        from emfabric.plots import plot_runs
+        from emfabric.viz.plots import plot_runs
 
         files = plot_runs([out_dir])
         for f in files:
@@ -197,7 +196,7 @@ def validate(
 ) -> None:
     """Check a scenario file; print the full scenario (defaults filled in) with --show."""
     sc = _load(scenario, set_)
-    from emfabric.builder import build_model
+    from emfabric.sim.builder import build_model
 
     try:
         model = build_model(sc)
@@ -222,110 +221,6 @@ def new(
     emit(_load(scenario, set_).to_commented_toml())
 
 
-def _points(args: list[str]) -> list[tuple[float, float, float]]:
-    """The points of repeated `--at X Y Z` options (Typer has no repeated three-value option)."""
-    import math
-
-    points, k = [], 0
-    while k < len(args):
-        if args[k] != "--at":
-            raise ValueError(f"unexpected argument {args[k]!r}; allowed: --at X Y Z, --time T, "
-                             f"--set KEY=VALUE")
-        vals = args[k + 1:k + 4]
-        try:
-            p = tuple(float(v) for v in vals)
-        except ValueError:
-            p = ()
-        if len(p) != 3 or not all(math.isfinite(c) for c in p):
-            raise ValueError(f"--at {' '.join(vals)}: allowed: three finite numbers X Y Z [m]")
-        points.append(p)
-        k += 4
-    return points
-
-
-@app.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
-def field(
-    ctx: typer.Context,
-    scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name")],
-    at_time: Annotated[float, typer.Option("--time", help="Time [s]")] = 0.0,
-    plot: Annotated[Path | None, typer.Option(
-        "--plot", help="Draw |B| over the sheet's plane and along the flight axis to this "
-                       "file (PNG, PDF, SVG)")] = None,
-    set_: Annotated[list[str] | None, typer.Option("--set", help="Override a value")] = None,
-) -> None:
-    """The applied field E [V/m] and B [T] at points given as --at X Y Z (repeat for more), as
-    JSON on stdout: {"E": [..], "B": [..]} for one point, a list of {"at", "E", "B"} for
-    several; with --plot, a figure of the field over the sheet and along the flight axis."""
-    import math
-
-    sc = _load(scenario, set_)
-    try:
-        at = _points(list(ctx.args))
-    except ValueError as err:
-        error(str(err))
-        raise typer.Exit(2) from None
-    if not at and plot is None:
-        error("give at least one point: --at X Y Z (or --plot FILE)")
-        raise typer.Exit(2)
-    if not math.isfinite(at_time):
-        error(f"--time {at_time}: allowed: a finite time [s]")
-        raise typer.Exit(2)
-    from emfabric.builder import build_field
-    from emfabric.fields import fields_at
-
-    try:
-        fld = build_field(sc)
-    except ScenarioError as err:
-        error(str(err))
-        raise typer.Exit(2) from None
-    if plot is not None:
-        emit(str(_field_figure(sc, fld, at_time, plot)))
-    if not at:
-        return
-    e, b = fields_at(fld, at, at_time)
-    rows = [{"at": list(p), "E": e[k].tolist(), "B": b[k].tolist()} for k, p in enumerate(at)]
-    if len(rows) == 1:
-        emit(json.dumps({"E": rows[0]["E"], "B": rows[0]["B"]}))
-    else:
-        emit(json.dumps(rows))
-
-
-def _field_figure(sc, fld, at_time: float, path: Path) -> Path:
-    """Evaluate the field over the sheet's plane (margin 25 %) and along the flight axis (from
-    the projectile's start to as far beyond the sheet), then draw it."""
-    import numpy as np
-
-    from emfabric.builder import build_model
-    from emfabric.field_plot import FieldPicture, draw
-    from emfabric.fields import fields_at
-
-    lx, ly = sc.fabric.size
-    xs = np.linspace(-0.625 * lx, 0.625 * lx, 81)
-    ys = np.linspace(-0.625 * ly, 0.625 * ly, 81)
-    gx, gy = np.meshgrid(xs, ys)
-    plane = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
-    _e, b_plane = fields_at(fld, plane, at_time)
-    # the projectile's start and flight direction, as the run would have them
-    import logging
-
-    sc_small = sc.replace(**{"fabric.nodes": [2, 2], "fabric.rescale": False})
-    quiet = logging.getLogger("emfabric.builder")
-    was, quiet.disabled = quiet.disabled, True  # its warnings would be about this dummy sheet
-    try:
-        model = build_model(sc_small)
-    finally:
-        quiet.disabled = was
-    start, d = model.body_x0, model.flight_direction
-    s_sheet = -start[2] / d[2] if d[2] != 0 else float("nan")
-    reach = 2.0 * (abs(s_sheet) if np.isfinite(s_sheet) else max(lx, ly))
-    s = np.linspace(0.0, max(reach, 0.5 * max(lx, ly)), 400)
-    _e, b_axis = fields_at(fld, start + np.outer(s, d), at_time)
-    pic = FieldPicture(xs, ys, b_plane.reshape(len(ys), len(xs), 3),
-                       (-lx / 2, lx / 2, -ly / 2, ly / 2), start, s, b_axis,
-                       s_sheet if s_sheet >= 0 else float("nan"), at_time, sc.name)
-    return draw(pic, path)
-
-
 @app.command()
 def scenarios() -> None:
     """List the built-in scenarios."""
@@ -333,15 +228,3 @@ def scenarios() -> None:
     for name in builtin_names():
         table.add_row(name, load_scenario(name).description)
     out_console.print(table)
-
-
-def main() -> None:  # pragma: no cover - console entry
-    try:
-        app()
-    except ScenarioError as err:
-        error(str(err))
-        sys.exit(2)
-
-
-# registers `plot`, `animate` (cli_plot) and the study commands (cli_study) after these
-from emfabric import cli_plot, cli_study  # noqa: E402,F401

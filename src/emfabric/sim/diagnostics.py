@@ -7,16 +7,16 @@ module fills; it computes nothing.
 
 from __future__ import annotations
 
-import math
 import weakref
 from typing import NamedTuple
 
 import numpy as np
 
 from emfabric._kernels import diagnostics as _k
-from emfabric.fastcall import Direct
-from emfabric.fields import fields_at
-from emfabric.model import Model, State
+from emfabric.sim.fastcall import Direct
+from emfabric.sim.model import Model
+from emfabric.sim.state import State
+from emfabric.sources.evaluate import fields_at
 
 # the history record: name -> (width, units, long name); width 3 means a (time, xyz) variable;
 # the column order of emfabric._kernels.diagnostics.history_row (column 0 is time)
@@ -119,11 +119,6 @@ def measure(model: Model, state: State, row: np.ndarray) -> FabricDiagnostics:
     """Fill `row` with the history record of `state` (the order of RECORD) and return the fabric
     diagnostics it was made from."""
     return _record(model, state, row, state.energy_initial)[0]
-
-
-def total_energy(model: Model, state: State) -> float:
-    """Kinetic + strain energy + dissipated − work so far [J] (the energy balance's total)."""
-    return _record(model, state, np.empty(COLUMNS), math.nan)[1]
 
 
 def left_for_good(model: Model, state: State, fab: FabricDiagnostics) -> str | None:

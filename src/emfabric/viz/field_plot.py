@@ -3,33 +3,13 @@ the flight axis, before a run (drawing only: the field values are computed by th
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-
-@dataclass(frozen=True)
-class FieldPicture:
-    """What the figure shows, every array already evaluated [SI]."""
-
-    xs: np.ndarray
-    """Grid over the sheet's plane z = 0 [m], (nx,)."""
-    ys: np.ndarray
-    b_plane: np.ndarray
-    """B on that grid [T], (ny, nx, 3)."""
-    sheet: tuple[float, float, float, float]
-    """Sheet extent (x_min, x_max, y_min, y_max) [m]."""
-    start: np.ndarray
-    """Projectile centre of mass at t = 0 [m], (3,)."""
-    s: np.ndarray
-    """Distance along the flight axis from the start [m], (n,)."""
-    b_axis: np.ndarray
-    """B along the flight axis [T], (n, 3)."""
-    s_sheet: float
-    """Where the flight axis meets z = 0 (nan if it does not) [m]."""
-    time: float
-    title: str
+if TYPE_CHECKING:
+    from emfabric.sources.picture import FieldPicture
 
 
 def draw(pic: FieldPicture, path: Path) -> Path:

@@ -42,7 +42,7 @@ class _Section(BaseModel):
                               use_attribute_docstrings=True)
 
 
-class Material(_Section):
+class MaterialSpec(_Section):
     model: Literal["kirchhoff-saint-venant", "fung"] = "kirchhoff-saint-venant"
     """Yarn law: "kirchhoff-saint-venant" (relaxed, eq. 2.4) or "fung" (section 6)."""
     youngs_modulus: PositiveFloat = 126e9
@@ -57,7 +57,7 @@ class Material(_Section):
     """Fung constant H [-] (model = "fung")."""
 
     @model_validator(mode="after")
-    def _fung_needs_constants(self) -> Material:
+    def _fung_needs_constants(self) -> MaterialSpec:
         if self.model == "fung":
             missing = [k for k in ("c", "H") if getattr(self, k) is None]
             if missing:
@@ -98,7 +98,7 @@ class Fabric(_Section):
     false: yarn_radius and charge_per_node are taken as they are at this spacing."""
     reference_nodes: tuple[Annotated[int, Field(ge=2)], Annotated[int, Field(ge=2)]] = (100, 100)
     """Grid on this sheet that yarn_radius and charge_per_node describe (rescale = true) [-]."""
-    material: Material = Material()
+    material: MaterialSpec = MaterialSpec()
     damage: Damage = Damage()
 
 
@@ -324,7 +324,7 @@ class FieldSpec(_Section):
         return data
 
 
-class Contact(_Section):
+class ContactSpec(_Section):
     static_friction: NonNegFloat = 1.0
     """Static friction coefficient μ_s [-]."""
     dynamic_friction: NonNegFloat = 0.95
@@ -340,7 +340,7 @@ class Contact(_Section):
     printed: an O(Δt) lag of sticking nodes, docs/theory.md §5)."""
 
     @model_validator(mode="after")
-    def _dynamic_not_above_static(self) -> Contact:
+    def _dynamic_not_above_static(self) -> ContactSpec:
         if self.dynamic_friction > self.static_friction:
             raise ValueError(
                 f"dynamic_friction = {self.dynamic_friction} exceeds static_friction = "
@@ -349,7 +349,7 @@ class Contact(_Section):
         return self
 
 
-class Solver(_Section):
+class SolverSpec(_Section):
     scheme: Literal["fixed-point", "anderson"] = "fixed-point"
     """Solver of each φ-step: the paper's fixed-point iteration, or its Anderson acceleration."""
     predictor: Literal["start", "explicit"] = "start"
@@ -382,7 +382,7 @@ class Solver(_Section):
     """History depth of scheme = "anderson" [-]."""
 
     @model_validator(mode="after")
-    def _dt_order(self) -> Solver:
+    def _dt_order(self) -> SolverSpec:
         if self.dt_min >= self.dt_max:
             raise ValueError(
                 f"dt_min = {self.dt_min} must be smaller than dt_max = {self.dt_max}"
@@ -411,8 +411,8 @@ class Scenario(_Section):
     fabric: Fabric = Fabric()
     projectile: Projectile = Projectile()
     field: FieldSpec = FieldSpec()
-    contact: Contact = Contact()
-    solver: Solver = Solver()
+    contact: ContactSpec = ContactSpec()
+    solver: SolverSpec = SolverSpec()
     output: Output = Output()
 
     @field_validator("name")
@@ -574,13 +574,13 @@ def scenario_from_dict(data: dict[str, Any], source: str = "<dict>") -> Scenario
 
 
 def builtin_names() -> list[str]:
-    """Names of the built-in scenarios shipped in ``emfabric/scenarios``."""
-    folder = resources.files("emfabric") / "scenarios"
+    """Names of the built-in scenarios shipped in ``emfabric/config/scenarios``."""
+    folder = resources.files("emfabric.config") / "scenarios"
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
 
 
 def builtin_text(name: str) -> str:
-    folder = resources.files("emfabric") / "scenarios"
+    folder = resources.files("emfabric.config") / "scenarios"
     path = folder / f"{name}.toml"
     if not path.is_file():
         raise ScenarioError(

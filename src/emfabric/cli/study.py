@@ -11,7 +11,7 @@ from typing import Annotated
 import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from emfabric.cli_app import app, console, emit, error, load_or_exit
+from emfabric.cli.app import app, console, emit, error, load_or_exit
 
 WorkersOpt = Annotated[int | None, typer.Option(
     "--workers", help="Local Dask cluster of N worker processes (default: one per two cores)")]
@@ -26,7 +26,7 @@ ThreadsOpt = Annotated[int | None, typer.Option(
 def _stop_on_signals() -> None:
     """SIGTERM and SIGHUP (a job scheduler's stop, a closed terminal) stop a study like Ctrl-C:
     the finished cases are on disk already, the local cluster is shut down."""
-    from emfabric.runner import interrupt
+    from emfabric.runner.loop import interrupt
 
     for name in ("SIGTERM", "SIGHUP"):
         if hasattr(signal, name):
@@ -56,8 +56,8 @@ def sweep(
 ) -> None:
     """Run every case of a study on Dask (reusing the cases already in the folder) and write
     DIR/results.nc."""
-    from emfabric.study import StudyError, load_study, read_case
-    from emfabric.study import sweep as run_sweep
+    from emfabric.studies.sweep import StudyError, load_study, read_case
+    from emfabric.studies.sweep import sweep as run_sweep
 
     try:
         plan = load_study(study)
@@ -113,7 +113,7 @@ def estimate(
 ) -> None:
     """The paper's back-of-envelope field for a target tilt (eqs 5.3-5.4, with the node
     charge): JSON on stdout."""
-    from emfabric.design import estimate as eq54
+    from emfabric.studies.design import estimate as eq54
 
     sc = load_or_exit(scenario, set_)
     try:
@@ -142,9 +142,9 @@ def design_field(
 ) -> None:
     """The smallest scale of the scenario's field whose run reaches the target tilt by the
     given time, found by a bracketed search over runs on Dask (eq 5.4 beside it)."""
-    from emfabric.design import design_field as search
     from emfabric.io.atomic import write_atomic
-    from emfabric.study import StudyError
+    from emfabric.studies.design import design_field as search
+    from emfabric.studies.sweep import StudyError
 
     sc = load_or_exit(scenario, set_)
     _stop_on_signals()
@@ -159,7 +159,7 @@ def design_field(
         raise typer.Exit(2) from None
     text = json.dumps(res, indent=1)
     write_atomic(out / "design.json", lambda tmp: tmp.write_text(text, encoding="utf-8"))
-    from emfabric.study_plots import design_figure
+    from emfabric.viz.study_plots import design_figure
 
     fig = design_figure(res, out / "design.png")
     if json_summary:
@@ -190,9 +190,9 @@ def ballistic_limit(
 ) -> None:
     """V_BL of the model by bracketing and bisecting the striking speed, the Lambert-Jonas fit
     of the residual speeds above it, and with --seeds, V50 and its spread (runs on Dask)."""
-    from emfabric.ballistic import ballistic_limit as search
-    from emfabric.ballistic import write_outputs
-    from emfabric.study import StudyError
+    from emfabric.studies.ballistic import ballistic_limit as search
+    from emfabric.studies.ballistic import write_outputs
+    from emfabric.studies.sweep import StudyError
 
     sc = load_or_exit(scenario, set_)
     _stop_on_signals()

@@ -24,43 +24,14 @@ from __future__ import annotations
 import logging
 
 import numpy as np
-from numba import njit, prange
 
-from emfabric._kernels.coils import loop_vectors
+from emfabric._kernels.coils import loop_values_on_grid
 from emfabric._kernels.records import Field
 
 log = logging.getLogger(__name__)
 
 MAGNET_WAVE = -1
 """grid_wave of the magnets' group: constant 1, no induced E."""
-
-
-@njit(cache=True)
-def _point_values(loops, group_of, x, out):
-    """out (groups, 6) = each group's b and a at the point x, summed over its loops in their
-    order. A call of its own: inlined into the parallel loop below, Numba's array analysis
-    failed on the tuples."""
-    out[:, :] = 0.0
-    for m in range(loops.shape[0]):
-        bu, au = loop_vectors(loops[m], x)
-        o = out[group_of[m]]
-        for c in range(3):
-            o[c] += bu[c]
-            o[3 + c] += au[c]
-
-
-@njit(cache=True, parallel=True)
-def _loop_values(loops, group_of, origin, step, shape, offset, out):
-    """Each group's b [T per unit waveform] and a [T m] at the points origin + (index +
-    offset)·step (offset a 3-vector): out (groups, *shape, 6)."""
-    nx, ny, nz = shape[0], shape[1], shape[2]
-    for i in prange(nx):
-        px = origin[0] + (i + offset[0]) * step[0]
-        for j in range(ny):
-            py = origin[1] + (j + offset[1]) * step[1]
-            for k in range(nz):
-                pz = origin[2] + (k + offset[2]) * step[2]
-                _point_values(loops, group_of, (px, py, pz), out[:, i, j, k])
 
 
 EDGES = ((0.5, 0.0, 0.0), (0.0, 0.5, 0.0), (0.0, 0.0, 0.5))
@@ -164,11 +135,11 @@ def build_source_grid(fld: Field, x0: np.ndarray, cells: int, tolerance: float,
     exact_cells = np.zeros(tuple(n_cells), dtype=np.uint8)
     if loops is not None:
         corner = np.zeros((n_loop_groups, *points, 6))
-        _loop_values(loops, group_of, origin, step, points, np.zeros(3), corner)
+        loop_values_on_grid(loops, group_of, origin, step, points, np.zeros(3), corner)
         checks = []
         for axis, offset in enumerate(EDGES, start=1):
             mid = np.zeros((n_loop_groups, *n_cells, 6))
-            _loop_values(loops, group_of, origin, step, n_cells, np.array(offset), mid)
+            loop_values_on_grid(loops, group_of, origin, step, n_cells, np.array(offset), mid)
             checks.append(_errors(mid, _edge_means(corner, axis)))
         values[:n_loop_groups] = corner
         exact_cells = _misses(checks, tolerance).astype(np.uint8)

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from emfabric.scenario import Scenario
+from emfabric.config.scenario import Scenario
 
 
 @dataclass
@@ -51,7 +51,7 @@ class Estimate:
 
 def estimate(scenario: Scenario, tilt: float, by: float) -> Estimate:
     """Eq 5.4 for the scenario's projectile and fabric (see the module docstring)."""
-    from emfabric.builder import build_model
+    from emfabric.sim.builder import build_model
 
     if not (tilt > 0.0 and math.isfinite(tilt)):
         raise ValueError(f"--target-tilt {tilt}: allowed: a positive angle [rad]")
@@ -82,42 +82,6 @@ def estimate(scenario: Scenario, tilt: float, by: float) -> Estimate:
     return Estimate(moment / denom, moment, inertia, q, speed, mu, n_c, radius, tilt, by)
 
 
-def scale_field(scenario: Scenario, s: float) -> Scenario:
-    """The scenario with every magnetic source scaled by s: the uniform B, the uniform
-    sources' B, the loops' and solenoids' currents (tables too), the magnets' polarization and
-    the maps' scale (E of a map scales with it; a uniform E does not)."""
-    data = scenario.to_dict()
-    fld = data.setdefault("field", {})
-    fld["B"] = [s * c for c in scenario.field.B]
-    sources = []
-    for src in scenario.field.sources:
-        d = src.model_dump(exclude_none=True)
-        if src.kind == "uniform":
-            d["B"] = [s * c for c in src.B]
-        elif src.kind in ("loop", "solenoid"):
-            if src.table is not None:
-                d["table"] = [[t, s * i] for t, i in src.table]
-            else:
-                d["current"] = s * src.current
-        elif src.kind == "magnet":
-            d["polarization"] = [s * c for c in src.polarization]
-        elif src.kind == "map":
-            d["scale"] = s * src.scale
-        sources.append(d)
-    fld["sources"] = sources
-    from emfabric.scenario import scenario_from_dict
-
-    return scenario_from_dict(data, f"{scenario.name} with the field × {s:g}")
-
-
-def field_at_centre(scenario: Scenario, t: float) -> list[float]:
-    """B [T] at the sheet's centre (the origin) at time t."""
-    from emfabric.builder import build_field
-    from emfabric.fields import fields_at
-
-    return [float(c) for c in fields_at(build_field(scenario), [[0.0, 0.0, 0.0]], t)[1][0]]
-
-
 @dataclass
 class Probe:
     scale: float
@@ -137,7 +101,8 @@ def design_field(scenario: Scenario, tilt: float, by: float, out, *,
     the probes are all written to probes.json, and the figure shows them)."""
     from pathlib import Path
 
-    from emfabric.study import Case, StudyError, case_key, connect, read_case, run_cases
+    from emfabric.sources.scaling import field_at_centre, scale_field
+    from emfabric.studies.sweep import Case, StudyError, case_key, connect, read_case, run_cases
 
     out = Path(out)
     est = estimate(scenario, tilt, by)

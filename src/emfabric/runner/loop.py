@@ -12,13 +12,11 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 import xarray as xr
 
 from emfabric._kernels import CACHE_DIR, CACHE_PERSISTENT, is_compiled, mark_compiled
-from emfabric.builder import build_model
-from emfabric.diagnostics import check_plausible, left_for_good, limits, measure
-from emfabric.integrator import DivergenceError, Integrator, StepInfo
+from emfabric.config.scenario import Scenario
+from emfabric.integrators import DivergenceError, Integrator, StepInfo
 from emfabric.io.checkpoint import (
     CHECKPOINT,
     CheckpointError,
@@ -30,16 +28,17 @@ from emfabric.io.checkpoint import (
 from emfabric.io.history import (
     Recorder,
     append_history,
-    fabric_reference,
     history_status,
     read_history_rows,
     run_attributes,
     write_history,
 )
 from emfabric.io.snapshots import Snapshots, snapshot_times, truncate_snapshots
-from emfabric.model import Model, State
-from emfabric.scenario import Scenario
-from emfabric.state import initial_state
+from emfabric.runner.summary import summarize
+from emfabric.sim.builder import build_model
+from emfabric.sim.diagnostics import check_plausible, left_for_good, limits, measure
+from emfabric.sim.model import Model
+from emfabric.sim.state import State, initial_state
 
 ProgressFn = Callable[[State, StepInfo], None]
 log = logging.getLogger(__name__)
@@ -73,20 +72,22 @@ class RunResult:
 
 
 def run(
-    scenario: Scenario,
+    scenario: Scenario | Model,
     out_dir: str | Path | None = None,
     *,
     progress: ProgressFn | None = None,
     end_time: float | None = None,
 ) -> RunResult:
-    """Run a scenario to its end; write history.nc, snapshots and checkpoints into out_dir if
-    given, as the run goes.
+    """Run a scenario (or a Model from build_model, or one put together in Python) to its end;
+    write history.nc, snapshots and checkpoints into out_dir if given, as the run goes. A Model
+    without a scenario writes no checkpoint (a checkpoint is resumed by rebuilding the Model
+    from its scenario).
 
     Ctrl-C (KeyboardInterrupt) and divergence leave valid files marked partial/diverged and a
     checkpoint; the exception is re-raised after the files are written, with the result
     attached as `.result`.
     """
-    model = build_model(scenario)
+    model = scenario if isinstance(scenario, Model) else build_model(scenario)
     out = Path(out_dir) if out_dir is not None else None
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
@@ -121,7 +122,7 @@ def resume(out_dir: str | Path, scenario: Scenario | None = None, *,
 def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
           progress: ProgressFn | None, end_time: float | None) -> RunResult:
     wall0 = time.perf_counter()
-    scenario = model.scenario
+    options = model.options
     integ = Integrator(model)
     # on a cold kernel cache, run serially and compile the threaded kernel beside the run
     deferred = integ.defer_threads()
@@ -129,8 +130,8 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
         log.info("compiling kernels (first run only, about half a minute; cached in %s)" if
                  CACHE_PERSISTENT else "compiling kernels (no writable cache folder: "
                  "every run compiles; cached in %s for this process)", CACHE_DIR)
-    t_end = end_time if end_time is not None else scenario.solver.end_time
-    interval = scenario.output.snapshot_interval
+    t_end = end_time if end_time is not None else options.end_time
+    interval = options.snapshot_interval
     if resumed is None:
         if out is not None:
             # a readable (empty) history before anything compiles: killed at any moment, the
@@ -183,6 +184,8 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
                 written = recorder.count
         with _naming(out / "snapshots.nc"):
             snaps.flush(attrs)
+        if model.scenario is None:
+            return  # nothing to rebuild the Model from on resume
         with _naming(out / CHECKPOINT):
             write_checkpoint(out / CHECKPOINT, model, s_in, RunPosition(
                 written, snaps.count if regular is None else regular, next_snap, wall()))
@@ -222,7 +225,7 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
                 break
             if out is not None and time.perf_counter() > next_checkpoint:
                 save("partial", "running (checkpoint)")
-                next_checkpoint = time.perf_counter() + scenario.output.checkpoint_seconds
+                next_checkpoint = time.perf_counter() + options.checkpoint_seconds
     except KeyboardInterrupt as exc:
         status, reason, error = "partial", f"interrupted at t = {s_in.t:.6g} s", exc
     except DivergenceError as exc:
@@ -294,38 +297,3 @@ def _signals_deferred():
             signal.signal(sig, handler)
     if caught:
         log.info("signal received while writing the files: they are complete")
-
-
-def summarize(result: RunResult) -> dict[str, float | int | str]:
-    """The end-of-run figures a user reads first."""
-    ds, st, m = result.history, result.state, result.model
-    steps = int(ds.sizes["time"]) - 1
-    out: dict[str, float | int | str] = {
-        "status": result.status,
-        "end_reason": result.end_reason,
-        "time_s": float(st.t),
-        "steps": steps,
-        "rejected_steps": int(st.rejected),
-        "force_evaluations": int(st.evaluations),
-        "mean_iterations": float(ds["iterations"][1:].mean()) if steps else 0.0,
-        "final_dt_s": float(ds["dt"][-1]) if steps else 0.0,
-        "wall_time_s": float(result.wall_time),
-        "broken_yarns": int(ds["broken_yarns"][-1]),
-        "min_damage": float(ds["min_damage"].min()),
-        "max_stretch": float(ds["max_stretch"].max()),
-        "max_deflection_m": float(ds["max_deflection"].max()),
-        "energy_balance_error_J": float(ds["energy_balance_error"][-1]),
-        "fabric": fabric_reference(m.scenario),
-    }
-    if m.has_body:
-        v = ds["projectile_velocity"][-1].values
-        w = ds["angular_velocity"][-1].values
-        ke = ds["kinetic_energy_projectile"].values
-        out.update({
-            "final_velocity_m_s": [float(c) for c in v],
-            "residual_speed_m_s": float(np.linalg.norm(v)),
-            "final_omega_rad_s": [float(c) for c in w],
-            "max_tilt_deg": float(np.degrees(ds["tilt"].max())),
-            "energy_absorbed_J": float(ke[0] - ke[-1]),
-        })
-    return out

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from emfabric.cli_app import app, emit, error, show_messages
+from emfabric.cli.app import app, emit, error, show_messages
 
 
 def _missing(err: FileNotFoundError) -> typer.Exit:
@@ -23,13 +23,13 @@ def plot(
 ) -> None:
     """Draw the spin, impact-sequence, energy and velocity figures (PNG and PDF); for a study
     folder (results.nc), each metric against the study's axes."""
-    from emfabric.plots import plot_runs
+    from emfabric.viz.plots import plot_runs
 
     show_messages()
     try:
         if len(runs) == 1 and (runs[0] / "results.nc").is_file() and \
                 not (runs[0] / "history.nc").is_file():
-            from emfabric.study_plots import study_figures
+            from emfabric.viz.study_plots import study_figures
 
             files = study_figures(runs[0], out)
         else:
@@ -49,8 +49,8 @@ def animate(
     fps: Annotated[int, typer.Option(min=1, help="Frames per second")] = 10,
 ) -> None:
     """Write an MP4 (and GIF) of the impact from the run's snapshots; prints their paths."""
-    from emfabric.animation import MP4_MISSING
-    from emfabric.animation import animate as make
+    from emfabric.viz.animation import MP4_MISSING
+    from emfabric.viz.animation import animate as make
 
     show_messages()
     if not (mp4 or gif):

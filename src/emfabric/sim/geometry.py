@@ -264,3 +264,65 @@ def geometry_of(projectile) -> ShapeGeometry:
     if pr.shape == "ogive":
         return ShapeGeometry("ogive", pr.radius, pr.length, pr.nose_length)
     return ShapeGeometry("cylinder", pr.radius, pr.length)
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A projectile's geometry and its state at t = 0, as a scenario describes it."""
+
+    geometry: ShapeGeometry
+    frame: np.ndarray
+    """Rows e1, e2, e3 (e3 the nose axis) of the shape frame in the body frame, (3, 3); the
+    body frame is the world frame at t = 0."""
+    inertia: np.ndarray
+    """Inertia about the centre of mass in the body frame [kg m²], (3, 3)."""
+    nose: np.ndarray
+    """The tilt and yaw marker relative to the centre of mass [m], (3,)."""
+    flight_direction: np.ndarray
+    """Unit vector of the initial velocity (−z if the body starts at rest)."""
+    position: np.ndarray
+    """Centre of mass [m], (3,)."""
+    velocity: np.ndarray
+    """[m/s], (3,)."""
+    angular_velocity: np.ndarray
+    """[rad/s], (3,)."""
+
+
+def initial_pose(projectile) -> Pose:
+    """Where a scenario's [projectile] (validated) starts and how it is oriented: the one place
+    that turns position, gap, velocity and axis into a pose (the builder, the field figure and
+    the studies all call it)."""
+    from emfabric.config.scenario import ScenarioError
+
+    pr = projectile
+    geo = geometry_of(pr)
+    velocity = np.asarray(pr.velocity, dtype=float)
+    speed = np.linalg.norm(velocity)
+    flight = velocity / speed if speed > 0 else np.array([0.0, 0.0, -1.0])
+    # the nose: the shape's axis at t = 0 (default: the flight direction); its leading surface
+    # point is the tilt and yaw marker (5.2)
+    lead = flight
+    if pr.axis is not None:
+        axis = np.asarray(pr.axis, dtype=float)
+        length = float(np.linalg.norm(axis))
+        if not length > 0.0:
+            raise ScenarioError(f"projectile.axis = {list(pr.axis)}: the nose direction must "
+                                f"be a non-zero vector")
+        lead = axis / length
+    # the body frame is the world frame at t = 0; the shape frame has e3 along the nose
+    frame = np.eye(3) if geo.kind == "sphere" else shape_frame(lead)
+    moments = (geo.principal_inertia(pr.mass) if pr.principal_inertia is None
+               else np.asarray(pr.principal_inertia, dtype=float))
+    inertia = frame.T @ np.diag(moments) @ frame
+    if geo.kind == "sphere":
+        nose = geo.radius * lead
+        lowest = geo.radius
+    else:
+        nose = (geo.length - geo.base) * lead
+        lowest = geo.extent(frame @ np.array([0.0, 0.0, -1.0]))
+    if pr.position is None:
+        position = np.array([0.0, 0.0, lowest + pr.gap])
+    else:
+        position = np.asarray(pr.position, dtype=float)
+    return Pose(geo, frame, inertia, nose, flight, position, velocity,
+                np.asarray(pr.angular_velocity, dtype=float))

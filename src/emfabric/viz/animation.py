@@ -20,7 +20,7 @@ import xarray as xr
 from matplotlib.colors import Normalize
 
 from emfabric.io.atomic import atomic_path
-from emfabric.plots import (
+from emfabric.viz.plots import (
     STYLE,
     SheetView,
     damage_colourbar,

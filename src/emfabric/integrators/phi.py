@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import math
 import threading
-from dataclasses import dataclass
 
 import numba
 import numpy as np
@@ -24,36 +23,10 @@ from emfabric._kernels.step import (
     NOT_FINITE,
     attempt_step,
 )
-from emfabric.fastcall import Direct
-from emfabric.model import Model, State
-
-
-class DivergenceError(RuntimeError):
-    """The step cannot converge even at dt_min; carries where and when."""
-
-    def __init__(self, message: str, t: float, dt: float, node: int, force: float):
-        super().__init__(message)
-        self.t, self.dt, self.node, self.force = t, dt, node, force
-
-
-@dataclass(frozen=True)
-class StepInfo:
-    """What one accepted step did."""
-
-    t: float
-    """Time reached [s]."""
-    dt: float
-    """Step just taken [s]."""
-    iterations: int
-    """Fixed-point iterations of the accepted attempt."""
-    error: float
-    """ϖ_K at acceptance."""
-    rejected: int
-    """Attempts rejected before this one."""
-    evaluations: int
-    """Force evaluations spent, rejected attempts included."""
-    contacts: int
-    """Nodes in contact at t + Δt."""
+from emfabric.integrators.base import DivergenceError, StepInfo
+from emfabric.sim.fastcall import Direct
+from emfabric.sim.model import Model
+from emfabric.sim.state import State
 
 
 def step_factor(error: float, k: int, tol: float, k_target: int, p: float) -> float:
@@ -75,7 +48,6 @@ class Integrator:
         THREADS_FROM_NODES nodes when Numba has more than one thread)."""
         self.model = model
         self.physics = model.physics
-        sc = model.scenario
         n = model.node_count
         # threads pay off on large sheets only; block size fixed, so results never depend on them
         self._use_threads(threads if threads is not None else (
@@ -85,7 +57,7 @@ class Integrator:
         self._background_ok = False
         self.work = make_work(model.nx, model.ny,
                               model.seg_count if model.physics.contact.segments else 0)
-        solver = sc.solver
+        solver = model.options
         # None for the plain fixed point: the step kernel is then compiled without Anderson
         self.accel = None
         if solver.scheme == "anderson":

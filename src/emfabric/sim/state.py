@@ -1,9 +1,6 @@
-"""Model (everything a step only reads) and State (everything a step writes).
-
-A Model is the scenario plus a composition of named records (emfabric._kernels.records): nodes,
-yarns, material, field, body, contact. The kernels take the ``physics`` record whole. A State is
-made by emfabric.state.initial_state; a checkpoint is a State (emfabric.io.checkpoint).
-"""
+"""State (everything a step writes) and the initial State of a Model: t = 0, the scenario's
+positions and velocities, ψ(0) and the energy reference. (States after that are written by the
+integrator or read from a checkpoint.)"""
 
 from __future__ import annotations
 
@@ -12,90 +9,22 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
+from emfabric._kernels.body import field_wrench
+from emfabric._kernels.diagnostics import total_energy
+from emfabric._kernels.fields import electric_at_nodes, fill_node_fields
+from emfabric._kernels.nodes import ROWBUF_ROWS, fused_iterate
 from emfabric._kernels.records import (
+    BODY_F,
+    BODY_M,
     BODY_R0,
+    BODY_ROWS,
     BODY_V,
     BODY_W,
     BODY_X,
-    Body,
-    Contact,
-    Field,
-    Material,
-    Nodes,
-    Physics,
     StateArrays,
-    Yarns,
+    make_work,
 )
-from emfabric.geometry import ShapeGeometry
-from emfabric.scenario import Scenario
-
-
-@dataclass(frozen=True, eq=False)
-class Model:
-    """Everything a step only reads, as named records, and the scenario it was built from."""
-
-    scenario: Scenario
-    physics: Physics
-    """The records the kernels take (nodes, yarns, material, field, body, contact)."""
-    geometry: ShapeGeometry = field(repr=False)
-    """The projectile's shape and dimensions (volume, inertia, surface mesh)."""
-    flight_direction: np.ndarray = field(repr=False)
-    """Unit vector of the projectile's initial velocity (−z if it starts at rest)."""
-    body_x0: np.ndarray = field(repr=False)
-    """Initial centre of mass [m]."""
-    body_v0: np.ndarray = field(repr=False)
-    body_w0: np.ndarray = field(repr=False)
-    node_v0: np.ndarray = field(repr=False)
-
-    @property
-    def nodes(self) -> Nodes:
-        return self.physics.nodes
-
-    @property
-    def yarns(self) -> Yarns:
-        return self.physics.yarns
-
-    @property
-    def material(self) -> Material:
-        return self.physics.material
-
-    @property
-    def field(self) -> Field:
-        return self.physics.field
-
-    @property
-    def body(self) -> Body:
-        return self.physics.body
-
-    @property
-    def contact(self) -> Contact:
-        return self.physics.contact
-
-    @property
-    def nx(self) -> int:
-        return self.nodes.nx
-
-    @property
-    def ny(self) -> int:
-        return self.nodes.ny
-
-    @property
-    def node_count(self) -> int:
-        return self.nodes.nx * self.nodes.ny
-
-    @property
-    def warp_count(self) -> int:
-        return self.ny * (self.nx - 1)
-
-    @property
-    def seg_count(self) -> int:
-        return self.yarns.ends.shape[0]
-
-    @property
-    def has_body(self) -> bool:
-        return bool(self.body.active)
-
-
+from emfabric.sim.model import Model
 
 # cumulative energy terms [J], in the order of State.energy
 ENERGY_TERMS = (
@@ -178,3 +107,50 @@ class State:
     def copy(self) -> State:
         return State(**{f.name: (v.copy() if isinstance(v, np.ndarray) else v)
                         for f in fields(self) for v in [getattr(self, f.name)]})
+
+
+def initial_state(model: Model) -> State:
+    """A fresh State at t = 0 with the non-impulsive forces ψ(0) on nodes and body (the first
+    step's explicit part) and the total energy that the energy balance is measured against."""
+    m = model
+    n, s = m.node_count, m.seg_count
+    st = State(
+        t=0.0,
+        dt=m.options.dt_initial,
+        node_x=m.nodes.x0.copy(),
+        node_v=m.node_v0.copy(),
+        node_f=np.zeros((3, n)),
+        node_e=np.zeros((3, n)),
+        seg_alpha=np.ones(s),
+        body=np.zeros((BODY_ROWS, 3)),
+    )
+    st.body[BODY_X] = m.body_x0
+    st.body[BODY_V] = m.body_v0
+    st.body[BODY_W] = m.body_w0
+    st.body[BODY_R0:BODY_R0 + 3] = np.eye(3)
+    update_forces(m, st)
+    st.energy_initial = float(total_energy(m.physics, st.node_x, st.node_v, st.seg_alpha,
+                                           st.body, st.energy, st.body[BODY_X],
+                                           m.flight_direction))
+    return st
+
+
+def update_forces(model: Model, state: State) -> None:
+    """Set the non-impulsive forces ψ(x, v, t) of the state's positions and velocities on nodes
+    (yarn + Lorentz + gravity) and body (field + gravity), the explicit part of the next step.
+
+    The node update with Δt = 0 and φ = 1 returns v1 = v and ψ in its force output."""
+    m = model
+    n = m.node_count
+    scratch = state.copy()
+    work = make_work(m.nx, m.ny, m.seg_count if m.physics.contact.segments else 0)
+    fill_node_fields(m.field, state.node_x, state.node_v, 0.0, state.t, work.node_field)
+    fused_iterate(m.nodes, m.yarns, m.material, m.field, work.node_field, state.node_x,
+                  state.node_x, state.node_v, np.zeros_like(state.node_f), state.seg_alpha,
+                  scratch.seg_alpha, work.damage_thr, scratch.node_x, scratch.node_v,
+                  state.node_f, np.ones(n, dtype=np.uint8), work.err_rows, work.err_num,
+                  work.err_den, state.t, 1.0, 0.0, np.empty((ROWBUF_ROWS, m.nx + 1)))
+    electric_at_nodes(m.field, work.node_field, state.node_x, state.t, state.node_e)
+    if m.has_body:
+        b = state.body
+        field_wrench(m.body, m.field, state.t, b, b[BODY_F], b[BODY_M])

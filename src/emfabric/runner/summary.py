@@ -1,0 +1,84 @@
+"""The run summary: the figures a user reads first, computed once from a finished (or stopped)
+run's history. ``emfabric run`` prints it (and ``--json`` emits it), ``RunResult.summary`` holds
+it, and the studies take their metrics from it (emfabric.studies.sweep.metrics_of)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from emfabric.io.history import fabric_reference
+
+
+def perforated(history, status: str, end_reason: str, bound: float) -> int:
+    """1 if the run ended by perforation, or at end_time moving forward, past the sheet's plane
+    (z = 0) by more than the body's bounding radius `bound` and clear of the fabric; 0 if it
+    rebounded, never touched or moves back; -1 undecided (still in contact and moving on at
+    end_time, diverged, failed)."""
+    ds = history
+    if status not in ("complete", "partial"):
+        return -1
+    v = ds["projectile_velocity"][-1].values
+    v0 = ds["projectile_velocity"][0].values
+    d = v0 / max(float(np.linalg.norm(v0)), 1e-300)
+    forward = float(v @ d)
+    # how far the centre is past the sheet's plane (z = 0), along the flight
+    past = float(ds["projectile_position"][-1].values @ d)
+    clear = past > bound
+    touching = int(ds["contact_nodes"][-1]) > 0
+    if end_reason == "perforation":
+        return 1
+    if end_reason in ("rebound", "never touched") or forward <= 0.0:
+        return 0
+    if clear and not touching:
+        return 1
+    if not clear and not touching and int(ds["contact_nodes"].max()) == 0:
+        return 0  # has not reached the sheet yet
+    return -1
+
+
+def summarize(result) -> dict[str, Any]:
+    """The end-of-run figures of a RunResult (emfabric.runner.loop)."""
+    ds, st, m = result.history, result.state, result.model
+    steps = int(ds.sizes["time"]) - 1
+    out: dict[str, Any] = {
+        "status": result.status,
+        "end_reason": result.end_reason,
+        "time_s": float(st.t),
+        "steps": steps,
+        "rejected_steps": int(st.rejected),
+        "force_evaluations": int(st.evaluations),
+        "mean_iterations": float(ds["iterations"][1:].mean()) if steps else 0.0,
+        "final_dt_s": float(ds["dt"][-1]) if steps else 0.0,
+        "wall_time_s": float(result.wall_time),
+        "broken_yarns": int(ds["broken_yarns"][-1]),
+        "min_damage": float(ds["min_damage"].min()),
+        "max_stretch": float(ds["max_stretch"].max()),
+        "max_deflection_m": float(ds["max_deflection"].max()),
+        "energy_balance_error_J": float(ds["energy_balance_error"][-1]),
+        "fabric": fabric_reference(m.scenario) if m.scenario is not None else "built in Python",
+    }
+    if m.has_body:
+        v = ds["projectile_velocity"][-1].values
+        w = ds["angular_velocity"][-1].values
+        ke = ds["kinetic_energy_projectile"].values
+        tilt = float(ds["tilt"].max())
+        yaw = float(ds["yaw"].max())
+        out.update({
+            "final_velocity_m_s": [float(c) for c in v],
+            "residual_speed_m_s": float(np.linalg.norm(v)),
+            "final_omega_rad_s": [float(c) for c in w],
+            "max_tilt_deg": float(np.degrees(tilt)),
+            "max_tilt_rad": tilt,
+            "max_yaw_rad": yaw,
+            "energy_absorbed_J": float(ke[0] - ke[-1]),
+            "perforated": perforated(ds, result.status, result.end_reason,
+                                     float(m.geometry.bound)),
+        })
+    else:
+        out.update({"final_omega_rad_s": [math.nan] * 3, "residual_speed_m_s": math.nan,
+                    "max_tilt_rad": math.nan, "max_yaw_rad": math.nan,
+                    "energy_absorbed_J": math.nan, "perforated": -1})
+    return out
