@@ -44,8 +44,10 @@ def _node_forces(x, nx, ny, coef, rest_w, rest_f, alpha, kind=0, fung_h=0.0, u_c
     )
     start = StateArrays(x, np.zeros((3, n)), np.zeros((3, n)), alpha, np.zeros((8, 3)))
     f1, a_out = np.empty((3, n)), np.empty(s)
-    fabric_iterate(phys, x, start, np.ones(n, np.uint8), np.empty((3, n)), np.empty((3, n)), f1,
-                   a_out, make_work(nx, ny), np.empty((ROWBUF_ROWS, nx + 1)), None, 0.0, 1.0,
+    work = make_work(nx, ny)
+    work.flag[:] = 1  # no error measure
+    out = StateArrays(np.empty((3, n)), np.empty((3, n)), f1, a_out, np.zeros((8, 3)))
+    fabric_iterate(phys, x, start, out, work, np.empty((ROWBUF_ROWS, nx + 1)), None, 0.0, 1.0,
                    0.0)
     return f1, a_out
 

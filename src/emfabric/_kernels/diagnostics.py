@@ -6,7 +6,46 @@ import numpy as np
 from numba import njit
 
 from emfabric._kernels.materials import strain_energy_density, stretch_sq
-from emfabric._kernels.records import BODY_R0, BODY_V, BODY_W, BODY_X
+from emfabric._kernels.records import (
+    BODY_R0,
+    BODY_V,
+    BODY_W,
+    BODY_X,
+    COL_BALANCE,
+    COL_BODY_ANGULAR,
+    COL_BODY_MOMENTUM,
+    COL_BROKEN,
+    COL_CONTACT_FORCE,
+    COL_CONTACTS,
+    COL_DEFLECTION,
+    COL_DT,
+    COL_ENERGY_TERMS,
+    COL_ERROR,
+    COL_EVALUATIONS,
+    COL_FABRIC_ANGULAR,
+    COL_FABRIC_MOMENTUM,
+    COL_ITERATIONS,
+    COL_KE_BODY,
+    COL_KE_BODY_ROTATION,
+    COL_KE_FABRIC,
+    COL_MIN_DAMAGE,
+    COL_NOSE,
+    COL_OMEGA,
+    COL_POSITION,
+    COL_REJECTED,
+    COL_STRAIN,
+    COL_STRETCH,
+    COL_TILT,
+    COL_TIME,
+    COL_VELOCITY,
+    COL_YAW,
+    ENERGY_CONTACT,
+    ENERGY_DAMAGE,
+    ENERGY_FRICTION,
+    ENERGY_PROJECTION,
+    ENERGY_WORK_FIELD,
+    ENERGY_WORK_GRAVITY,
+)
 from emfabric._kernels.vec3 import (
     cross,
     dot,
@@ -127,8 +166,9 @@ def _body_energy(body, b_state):
 def _total_energy(ke_t, ke_r, diag, energy):
     """Kinetic + strain energy + dissipated − work so far [J] (the energy balance's total; the
     terms of energy in the order of records.ENERGY_TERMS)."""
-    return (ke_t + ke_r + diag[KE] + diag[STRAIN] + energy[2] + energy[3] + energy[4]
-            + energy[5] - energy[0] - energy[1])
+    return (ke_t + ke_r + diag[KE] + diag[STRAIN] + energy[ENERGY_FRICTION]
+            + energy[ENERGY_CONTACT] + energy[ENERGY_PROJECTION] + energy[ENERGY_DAMAGE]
+            - energy[ENERGY_WORK_FIELD] - energy[ENERGY_WORK_GRAVITY])
 
 
 @njit(cache=True)
@@ -141,9 +181,11 @@ def total_energy(phys, x, v, alpha, b_state, energy, centre, direction):
 
 
 @njit(cache=True)
-def history_row(t, dt, iterations, error, rejected, evaluations, contacts, b_state, body, diag,
-                energy, e_initial, contact_force, row):
-    """Write one history record (the column order of emfabric.io.history.VARIABLES) into row.
+def history_row(step, b_state, body, diag, energy, e_initial, contact_force, row):
+    """Write one history record into row (the columns of records.HISTORY_VARIABLES): the step's
+    statistics (a StepStats), the body state, the fabric diagnostics `diag` (fabric_diagnostics),
+    the cumulative energy terms, the contact force; e_initial: the energy reference (NaN: this
+    record's own total).
 
     Returns the record's total energy (kinetic + strain + dissipated − work) [J].
     """
@@ -165,41 +207,36 @@ def history_row(t, dt, iterations, error, rejected, evaluations, contacts, b_sta
     yaw = yaw_angle(rot, nose_body, v) if has_body else 0.0
     total = _total_energy(ke_t, ke_r, diag, energy)
     e0 = total if math.isnan(e_initial) else e_initial
-    row[0] = t
-    row[1] = dt
-    row[2] = iterations
-    row[3] = error
-    row[4] = rejected
-    row[5] = evaluations
+    row[COL_TIME] = step.t
+    row[COL_DT] = step.dt
+    row[COL_ITERATIONS] = step.iterations
+    row[COL_ERROR] = step.error
+    row[COL_REJECTED] = step.rejected
+    row[COL_EVALUATIONS] = step.evaluations
     for c in range(3):
-        row[6 + c] = x[c]
-        row[9 + c] = v[c]
-        row[12 + c] = w[c]
-        row[15 + c] = nose[c]
-    k = 18
-    row[k] = tilt
-    row[k + 1] = contacts
-    row[k + 2] = diag[DEFLECTION]
-    row[k + 3] = diag[STRETCH]
-    k += 4
+        row[COL_POSITION + c] = x[c]
+        row[COL_VELOCITY + c] = v[c]
+        row[COL_OMEGA + c] = w[c]
+        row[COL_NOSE + c] = nose[c]
+    row[COL_TILT] = tilt
+    row[COL_CONTACTS] = step.contacts
+    row[COL_DEFLECTION] = diag[DEFLECTION]
+    row[COL_STRETCH] = diag[STRETCH]
     for c in range(3):
-        row[k + c] = diag[PX + c]
-        row[k + 3 + c] = diag[LX + c]
-        row[k + 6 + c] = p[c]
-        row[k + 9 + c] = ang[c]
-    k += 12
-    row[k] = ke_t + ke_r
-    row[k + 1] = ke_r
-    row[k + 2] = diag[KE]
-    row[k + 3] = diag[STRAIN]
-    row[k + 4] = diag[BROKEN]
-    row[k + 5] = diag[MIN_ALPHA]
-    k += 6
-    for c in range(6):
-        row[k + c] = energy[c]
-    row[k + 6] = total - e0
-    k += 7
-    row[k] = yaw
+        row[COL_FABRIC_MOMENTUM + c] = diag[PX + c]
+        row[COL_FABRIC_ANGULAR + c] = diag[LX + c]
+        row[COL_BODY_MOMENTUM + c] = p[c]
+        row[COL_BODY_ANGULAR + c] = ang[c]
+    row[COL_KE_BODY] = ke_t + ke_r
+    row[COL_KE_BODY_ROTATION] = ke_r
+    row[COL_KE_FABRIC] = diag[KE]
+    row[COL_STRAIN] = diag[STRAIN]
+    row[COL_BROKEN] = diag[BROKEN]
+    row[COL_MIN_DAMAGE] = diag[MIN_ALPHA]
+    for c in range(energy.shape[0]):
+        row[COL_ENERGY_TERMS + c] = energy[c]
+    row[COL_BALANCE] = total - e0
+    row[COL_YAW] = yaw
     for c in range(3):
-        row[k + 1 + c] = contact_force[c]
+        row[COL_CONTACT_FORCE + c] = contact_force[c]
     return e0

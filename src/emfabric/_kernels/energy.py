@@ -20,14 +20,25 @@ from emfabric._kernels.fields import (
     node_field,
 )
 from emfabric._kernels.materials import strain_energy_density, stretch_sq
-from emfabric._kernels.records import BODY_R0, BODY_V, BODY_W, BODY_X
+from emfabric._kernels.records import (
+    BODY_R0,
+    BODY_V,
+    BODY_W,
+    BODY_X,
+    ENERGY_CONTACT,
+    ENERGY_DAMAGE,
+    ENERGY_FRICTION,
+    ENERGY_PROJECTION,
+    ENERGY_WORK_FIELD,
+    ENERGY_WORK_GRAVITY,
+)
 from emfabric._kernels.vec3 import cross, dot, mat_vec, vec
 
 
 @njit(cache=True)
 def step_energy(phys, sin, sout, nc, work, t0, phi, dt, out):
     """Add the field work, gravity work and dissipations of the accepted step from sin (at t0)
-    to sout (at t0 + Δt) to out (6,) [J] (the order of emfabric.sim.model.ENERGY_TERMS)."""
+    to sout (at t0 + Δt) to out (6,) [J] (the order of records.ENERGY_TERMS)."""
     nodes, yarns, mat, fld, body = phys.nodes, phys.yarns, phys.material, phys.field, phys.body
     mass, inv_mass, charge = nodes.mass, nodes.inv_mass, nodes.charge
     grav = fld.gravity
@@ -122,9 +133,9 @@ def step_energy(phys, sin, sout, nc, work, t0, phi, dt, out):
             u2 = stretch_sq(x1[0, b] - x1[0, a], x1[1, b] - x1[1, a], x1[2, b] - x1[2, a],
                             yarns.inv_rest2[s])
             d_dam += drop * coef[s] * rest[s] * rest[s] * strain_energy_density(u2, mat)
-    out[0] += w_field
-    out[1] += w_grav
-    out[2] += d_fric
-    out[3] += d_cont
-    out[4] += d_proj
-    out[5] += d_dam
+    out[ENERGY_WORK_FIELD] += w_field
+    out[ENERGY_WORK_GRAVITY] += w_grav
+    out[ENERGY_FRICTION] += d_fric
+    out[ENERGY_CONTACT] += d_cont
+    out[ENERGY_PROJECTION] += d_proj
+    out[ENERGY_DAMAGE] += d_dam

@@ -15,8 +15,7 @@ import math
 from numba import njit, prange
 
 from emfabric._kernels.fields import magnetic_force, node_field
-from emfabric._kernels.materials import damage_above, fung_stress, ksv_stress, stretch_sq
-from emfabric._kernels.records import MATERIAL_FUNG
+from emfabric._kernels.materials import damage_above, stress_factor, stretch_sq
 
 
 @njit(cache=True)
@@ -50,42 +49,65 @@ def _row_sums(err_num, err_den, nx, ny, err_rows):
         err_rows[1, j] = (b0 + b1) + (b2 + b3)
 
 
-# rows of a block's row buffer, shape (ROWBUF_ROWS, nx + 1)
-_TW, _TU, _TD, _D, _U2, _AL, _F, _A, _UU, _AU, _INV, _H = (
-    0, 3, 6, 9, 12, 13, 14, 17, 20, 23, 24, 25)
+# rows of a block's row buffer, shape (ROWBUF_ROWS, nx + 1): the first row of each quantity
+ROW_WARP_TENSION = 0
+"""Tension vectors of a grid row's warp segments, padded with zeros at both ends (3 rows)."""
+ROW_FILL_UP = 3
+"""Tension vectors of the fill segments from a row to the next (3 rows)."""
+ROW_FILL_DOWN = 6
+"""Tension vectors of the fill segments from the row below (3 rows)."""
+ROW_SEGMENT = 9
+"""Segment vectors d = x_b − x_a of the tensions being computed (3 rows)."""
+ROW_STRETCH_SQ = 12
+"""Their stretch² U²."""
+ROW_STRESS = 13
+"""Their trial damage α, then α·stiffness·S/𝔼 (the tension per unit length of d)."""
+ROW_FORCE = 14
+"""Non-magnetic node force of the row: yarns + electric + gravity (3 rows)."""
+ROW_VEL_EXPLICIT = 17
+"""v0 + Δt/m (φ ψ + (1−φ) ψ0) without the magnetic force: the right side of the implicit
+magnetic solve (3 rows)."""
+ROW_ROTATION = 20
+"""u = φΔt q B / m, the rotation vector of the implicit magnetic solve (3 rows)."""
+ROW_PROJECTION = 23
+"""a·u."""
+ROW_INV_DENOM = 24
+"""1/(1 + |u|²)."""
+ROW_DT_OVER_MASS = 25
+"""Δt/m (0 for a clamped node)."""
 ROWBUF_ROWS = 26
 
 
 @njit(cache=True)
-def _tensions(xa_x, xa_y, xa_z, xb_x, xb_y, xb_z, count, il2, alpha_c, alpha_t, thr2, coef, mat,
-              buf, out, write_alpha):
-    """Tension vectors of `count` segments joining a[i] to b[i] (row views) into out[:, :count].
+def _tensions(xa, xb, count, inv_rest2, seg, mat, buf, out, write_alpha):
+    """Tension vectors of `count` segments joining a[i] to b[i] into out[:, :count].
 
+    xa, xb: the (x, y, z) row views of the end nodes; seg: the segments' views (committed α,
+    trial α written when write_alpha, damage thresholds U², stiffness); inv_rest2: their 1/L0².
     Split into short loops over few arrays so that the compiler vectorises them.
     """
-    dx, dy, dz = buf[_D], buf[_D + 1], buf[_D + 2]
-    u2 = buf[_U2]
-    al = buf[_AL]
+    xa_x, xa_y, xa_z = xa
+    xb_x, xb_y, xb_z = xb
+    alpha_c, alpha_t, damage_thr, coef = seg
+    dx, dy, dz = buf[ROW_SEGMENT], buf[ROW_SEGMENT + 1], buf[ROW_SEGMENT + 2]
+    u2 = buf[ROW_STRETCH_SQ]
+    al = buf[ROW_STRESS]
     for i in range(count):
         dx[i] = xb_x[i] - xa_x[i]
         dy[i] = xb_y[i] - xa_y[i]
         dz[i] = xb_z[i] - xa_z[i]
     for i in range(count):
-        u2[i] = stretch_sq(dx[i], dy[i], dz[i], il2)
+        u2[i] = stretch_sq(dx[i], dy[i], dz[i], inv_rest2)
     for i in range(count):
-        al[i] = damage_above(alpha_c[i], u2[i], thr2[i], mat)
+        al[i] = damage_above(alpha_c[i], u2[i], damage_thr[i], mat)
     if write_alpha:
         for i in range(count):
             alpha_t[i] = al[i]
     tx, ty, tz = out[0], out[1], out[2]
-    # one loop per law (stress_factor's two branches), so that each vectorises
-    if mat.kind == MATERIAL_FUNG:
-        fung_h = mat.fung_h
-        for i in range(count):
-            al[i] = al[i] * coef[i] * fung_stress(u2[i], fung_h)
-    else:
-        for i in range(count):
-            al[i] = al[i] * coef[i] * ksv_stress(u2[i])
+    # the stress law (materials.stress_factor, the one dispatch on the material's kind: the
+    # branch is loop-invariant, so the compiler splits the loop and vectorises each law)
+    for i in range(count):
+        al[i] = al[i] * coef[i] * stress_factor(u2[i], mat)
     for i in range(count):
         tx[i] = al[i] * dx[i]
         ty[i] = al[i] * dy[i]
@@ -93,52 +115,60 @@ def _tensions(xa_x, xa_y, xa_z, xb_x, xb_y, xb_z, count, il2, alpha_c, alpha_t, 
 
 
 @njit(cache=True)
-def _row_block(j0, j1, nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, thr2, t1,
-               phi, dt, skip_err, x1, v1, f1, err_num, err_den, buf):
+def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
     """Rows j0 ≤ j < j1 of the fused iterate. The tensions of row j (warp) and between rows j and
     j + 1 (fill) live in the block's row buffer and are consumed at once; a block recomputes the
     fill tensions below its first row (writing no damage), so blocks are independent."""
+    nodes, yarns, mat, fld = phys.nodes, phys.yarns, phys.material, phys.field
+    node_fields = work.node_field
+    x0, v0, f0, alpha_c = sin.x, sin.v, sin.f, sin.alpha
+    x1, v1, f1, alpha_t = sout.x, sout.v, sout.f, sout.alpha
+    damage_thr, skip_err = work.damage_thr, work.flag
+    err_num, err_den = work.err_num, work.err_den
     nx, ny = nodes.nx, nodes.ny
     mass, inv_mass, charge = nodes.mass, nodes.inv_mass, nodes.charge
     coef = yarns.stiffness
     grav = fld.gravity
     nw = ny * (nx - 1)
     # rest lengths are uniform per yarn family on the regular grid
-    il_w = yarns.inv_rest2[0]
-    il_f = yarns.inv_rest2[yarns.inv_rest2.shape[0] - 1]
+    inv_rest2_warp = yarns.inv_rest2[0]
+    inv_rest2_fill = yarns.inv_rest2[yarns.inv_rest2.shape[0] - 1]
     xx, xy, xz = prev[0], prev[1], prev[2]
     # padded warp row: twp[:, i + 1] is the tension of segment (i, i + 1), zeros at both ends
-    twp = buf[_TW:_TW + 3]
-    tu = buf[_TU:_TU + 3]
-    td = buf[_TD:_TD + 3]
+    twp = buf[ROW_WARP_TENSION:ROW_WARP_TENSION + 3]
+    tu = buf[ROW_FILL_UP:ROW_FILL_UP + 3]
+    td = buf[ROW_FILL_DOWN:ROW_FILL_DOWN + 3]
     twp[:, 0] = 0.0
     twp[:, nx] = 0.0
     if j0 > 0:
         a = (j0 - 1) * nx
-        _tensions(xx[a:a + nx], xy[a:a + nx], xz[a:a + nx], xx[a + nx:a + 2 * nx],
-                  xy[a + nx:a + 2 * nx], xz[a + nx:a + 2 * nx], nx, il_f,
-                  alpha_c[nw + a:nw + a + nx], alpha_t[nw + a:nw + a + nx],
-                  thr2[nw + a:nw + a + nx], coef[nw + a:nw + a + nx], mat, buf, td, False)
+        s = nw + a
+        _tensions((xx[a:a + nx], xy[a:a + nx], xz[a:a + nx]),
+                  (xx[a + nx:a + 2 * nx], xy[a + nx:a + 2 * nx], xz[a + nx:a + 2 * nx]), nx,
+                  inv_rest2_fill, (alpha_c[s:s + nx], alpha_t[s:s + nx],
+                                   damage_thr[s:s + nx], coef[s:s + nx]), mat, buf, td, False)
     else:
         td[:] = 0.0
-    f = buf[_F:_F + 3]
-    acc = buf[_A:_A + 3]
-    uu = buf[_UU:_UU + 3]
-    au = buf[_AU]
-    inv = buf[_INV]
-    hh = buf[_H]
+    f = buf[ROW_FORCE:ROW_FORCE + 3]
+    acc = buf[ROW_VEL_EXPLICIT:ROW_VEL_EXPLICIT + 3]
+    uu = buf[ROW_ROTATION:ROW_ROTATION + 3]
+    a_dot_u = buf[ROW_PROJECTION]
+    inv = buf[ROW_INV_DENOM]
+    dt_over_m = buf[ROW_DT_OVER_MASS]
     for j in range(j0, j1):
         nb = j * nx
         sb = j * (nx - 1)
         e = nb + nx
-        _tensions(xx[nb:e - 1], xy[nb:e - 1], xz[nb:e - 1], xx[nb + 1:e], xy[nb + 1:e],
-                  xz[nb + 1:e], nx - 1, il_w, alpha_c[sb:sb + nx - 1],
-                  alpha_t[sb:sb + nx - 1], thr2[sb:sb + nx - 1], coef[sb:sb + nx - 1], mat, buf,
-                  twp[:, 1:], True)
+        _tensions((xx[nb:e - 1], xy[nb:e - 1], xz[nb:e - 1]), (xx[nb + 1:e], xy[nb + 1:e],
+                  xz[nb + 1:e]), nx - 1, inv_rest2_warp,
+                  (alpha_c[sb:sb + nx - 1], alpha_t[sb:sb + nx - 1],
+                   damage_thr[sb:sb + nx - 1], coef[sb:sb + nx - 1]), mat, buf, twp[:, 1:],
+                  True)
         if j < ny - 1:
-            _tensions(xx[nb:e], xy[nb:e], xz[nb:e], xx[e:e + nx], xy[e:e + nx], xz[e:e + nx],
-                      nx, il_f, alpha_c[nw + nb:nw + e], alpha_t[nw + nb:nw + e],
-                      thr2[nw + nb:nw + e], coef[nw + nb:nw + e], mat, buf, tu, True)
+            _tensions((xx[nb:e], xy[nb:e], xz[nb:e]), (xx[e:e + nx], xy[e:e + nx],
+                      xz[e:e + nx]), nx, inv_rest2_fill,
+                      (alpha_c[nw + nb:nw + e], alpha_t[nw + nb:nw + e],
+                       damage_thr[nw + nb:nw + e], coef[nw + nb:nw + e]), mat, buf, tu, True)
         else:
             tu[:, :nx] = 0.0
         m = mass[nb:e]
@@ -151,7 +181,7 @@ def _row_block(j0, j1, nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, al
         # predicted position). fields.node_field, chosen at compile time by the field's type
         px, py, pz = xx[nb:e], xy[nb:e], xz[nb:e]
         for i in range(nx):
-            hh[i] = dt * im[i]
+            dt_over_m[i] = dt * im[i]
         for c in range(3):
             fc = f[c]
             tw = twp[c]
@@ -161,34 +191,34 @@ def _row_block(j0, j1, nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, al
             # yarn force, one difference per node and direction (mirror-exact assembly),
             # then the electric part of eq. 2.7 and gravity
             for i in range(nx):
-                fe, _fb = node_field(fld, nf, nb + i, (px[i], py[i], pz[i]), t1)
+                fe, _fb = node_field(fld, node_fields, nb + i, (px[i], py[i], pz[i]), t1)
                 fc[i] = ((tw[i + 1] - tw[i]) + (tuc[i] - tdc[i])) + (m[i] * g + q[i] * fe[c])
             ac = acc[c]
             v0c = v0[c, nb:e]
             f0c = f0[c, nb:e]
             for i in range(nx):
-                ac[i] = v0c[i] + hh[i] * (phi * fc[i] + (1.0 - phi) * f0c[i])
+                ac[i] = v0c[i] + dt_over_m[i] * (phi * fc[i] + (1.0 - phi) * f0c[i])
         # magnetic part implicit in v1: v1 − v1 × u = a with u = φΔt q B / m (solved exactly)
         ux, uy, uz = uu[0], uu[1], uu[2]
         ax, ay, az = acc[0], acc[1], acc[2]
         for i in range(nx):
-            _fe, fb = node_field(fld, nf, nb + i, (px[i], py[i], pz[i]), t1)
-            beta = phi * hh[i] * q[i]
+            _fe, fb = node_field(fld, node_fields, nb + i, (px[i], py[i], pz[i]), t1)
+            beta = phi * dt_over_m[i] * q[i]
             ux[i] = beta * fb[0]
             uy[i] = beta * fb[1]
             uz[i] = beta * fb[2]
         for i in range(nx):
-            au[i] = ax[i] * ux[i] + ay[i] * uy[i] + az[i] * uz[i]
+            a_dot_u[i] = ax[i] * ux[i] + ay[i] * uy[i] + az[i] * uz[i]
             inv[i] = 1.0 / (1.0 + ux[i] * ux[i] + uy[i] * uy[i] + uz[i] * uz[i])
         vx, vy, vz = v1[0, nb:e], v1[1, nb:e], v1[2, nb:e]
         for i in range(nx):
-            vx[i] = (ax[i] + (ay[i] * uz[i] - az[i] * uy[i]) + au[i] * ux[i]) * inv[i]
-            vy[i] = (ay[i] + (az[i] * ux[i] - ax[i] * uz[i]) + au[i] * uy[i]) * inv[i]
-            vz[i] = (az[i] + (ax[i] * uy[i] - ay[i] * ux[i]) + au[i] * uz[i]) * inv[i]
+            vx[i] = (ax[i] + (ay[i] * uz[i] - az[i] * uy[i]) + a_dot_u[i] * ux[i]) * inv[i]
+            vy[i] = (ay[i] + (az[i] * ux[i] - ax[i] * uz[i]) + a_dot_u[i] * uy[i]) * inv[i]
+            vz[i] = (az[i] + (ax[i] * uy[i] - ay[i] * ux[i]) + a_dot_u[i] * uz[i]) * inv[i]
         fx, fy, fz = f[0], f[1], f[2]
         gx, gy, gz = f1[0, nb:e], f1[1, nb:e], f1[2, nb:e]
         for i in range(nx):
-            _fe, fb = node_field(fld, nf, nb + i, (px[i], py[i], pz[i]), t1)
+            _fe, fb = node_field(fld, node_fields, nb + i, (px[i], py[i], pz[i]), t1)
             fm = magnetic_force(q[i], (vx[i], vy[i], vz[i]), fb)
             gx[i] = fx[i] + fm[0]
             gy[i] = fy[i] + fm[1]
@@ -224,27 +254,27 @@ ROWS_PER_BLOCK = 16
 
 
 @njit(cache=True)
-def fused_iterate(nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, thr2, x1, v1,
-                  f1, skip_err, err_rows, err_num, err_den, t1, phi, dt, rowbuf):
+def fused_iterate(phys, prev, sin, sout, work, t1, phi, dt, rowbuf):
     """Yarn tensions at the iterate `prev` and the φ-update of every node from the start state
-    (x0, v0, f0, alpha_c) into (x1, v1, f1), trial damage into alpha_t (serial).
+    sin (x, v, f, committed α) into sout (x, v, f; trial damage into sout.alpha), serially.
 
-    rowbuf: (ROWBUF_ROWS, nx + 1). Walks the same row blocks as the threaded kernel, one after
-    the other: the same arithmetic, and one compiled specialisation of _row_block for both.
+    work: the step's Work record (node fields, damage thresholds, flag — nodes left out of the
+    error measure —, the error terms and their per-row sums err_rows). rowbuf: (ROWBUF_ROWS,
+    nx + 1). Walks the same row blocks as the threaded kernel, one after the other: the same
+    arithmetic, and one compiled specialisation of _row_block for both.
     """
+    nodes = phys.nodes
     ny = nodes.ny
     blocks = (ny + ROWS_PER_BLOCK - 1) // ROWS_PER_BLOCK
     for b in range(blocks):
         j0 = b * ROWS_PER_BLOCK
         j1 = min(ny, j0 + ROWS_PER_BLOCK)
-        _row_block(j0, j1, nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, thr2,
-                   t1, phi, dt, skip_err, x1, v1, f1, err_num, err_den, rowbuf)
-    _row_sums(err_num, err_den, nodes.nx, ny, err_rows)
+        _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, rowbuf)
+    _row_sums(work.err_num, work.err_den, nodes.nx, ny, work.err_rows)
 
 
 @njit(parallel=True)  # never cached on its own: see the docstring
-def fused_iterate_threads(nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, thr2,
-                          x1, v1, f1, skip_err, err_rows, err_num, err_den, t1, phi, dt, rowbuf):
+def fused_iterate_threads(phys, prev, sin, sout, work, t1, phi, dt, rowbuf):
     """fused_iterate over blocks of ROWS_PER_BLOCK rows in parallel threads; rowbuf (blocks,
     ROWBUF_ROWS, nx + 1). Every value is computed by the same arithmetic as in the serial
     kernel, so results do not depend on the number of threads.
@@ -258,11 +288,11 @@ def fused_iterate_threads(nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c,
     threaded step kernel, then any later run; Numba issues #8578 and #10128 describe the same
     mismatch of a parallel callee's native names between processes). Compiled afresh with its
     caller, it is linked into the caller's cached code."""
+    nodes = phys.nodes
     ny = nodes.ny
     blocks = (ny + ROWS_PER_BLOCK - 1) // ROWS_PER_BLOCK
     for b in prange(blocks):
         j0 = b * ROWS_PER_BLOCK
         j1 = min(ny, j0 + ROWS_PER_BLOCK)
-        _row_block(j0, j1, nodes, yarns, mat, fld, nf, prev, x0, v0, f0, alpha_c, alpha_t, thr2,
-                   t1, phi, dt, skip_err, x1, v1, f1, err_num, err_den, rowbuf[b])
-    _row_sums(err_num, err_den, nodes.nx, ny, err_rows)
+        _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, rowbuf[b])
+    _row_sums(work.err_num, work.err_den, nodes.nx, ny, work.err_rows)

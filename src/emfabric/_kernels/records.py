@@ -24,6 +24,71 @@ BODY_X, BODY_V, BODY_W, BODY_F, BODY_M, BODY_R0 = 0, 1, 2, 3, 4, 5
 force and moment at the state's time, rotation matrix (three rows)."""
 BODY_ROWS = 8
 
+ENERGY_TERMS = ("work_field", "work_gravity", "dissipation_friction", "dissipation_contact",
+                "dissipation_projection", "dissipation_damage")
+"""The cumulative energy terms [J] of a State (State.energy) in their order: the only place it is
+spelled; the kernels index them by the constants below."""
+(ENERGY_WORK_FIELD, ENERGY_WORK_GRAVITY, ENERGY_FRICTION, ENERGY_CONTACT, ENERGY_PROJECTION,
+ ENERGY_DAMAGE) = range(len(ENERGY_TERMS))
+
+HISTORY_VARIABLES = (
+    ("dt", 1), ("iterations", 1), ("error", 1), ("rejected_steps", 1), ("force_evaluations", 1),
+    ("projectile_position", 3), ("projectile_velocity", 3), ("angular_velocity", 3),
+    ("projectile_nose", 3), ("tilt", 1), ("contact_nodes", 1), ("max_deflection", 1),
+    ("max_stretch", 1), ("fabric_momentum", 3), ("fabric_angular_momentum", 3),
+    ("projectile_momentum", 3), ("projectile_angular_momentum", 3),
+    ("kinetic_energy_projectile", 1), ("kinetic_energy_projectile_rotation", 1),
+    ("kinetic_energy_fabric", 1), ("strain_energy", 1), ("broken_yarns", 1), ("min_damage", 1),
+    *((name, 1) for name in ENERGY_TERMS),
+    ("energy_balance_error", 1), ("yaw", 1), ("contact_force", 3), ("field_B", 3),
+    ("field_E", 3),
+)
+"""The history record's variables and widths (3: an xyz vector), in the order of its columns
+after the time (column 0): the one layout the record kernel (diagnostics.history_row) writes and
+the recorder (emfabric.io.history) reads."""
+
+
+def _history_columns() -> dict[str, int]:
+    out, col = {}, 1
+    for name, width in HISTORY_VARIABLES:
+        out[name] = col
+        col += width
+    return out
+
+
+HISTORY_COLUMN = _history_columns()
+"""First column of each history variable."""
+HISTORY_COLUMNS = 1 + sum(width for _name, width in HISTORY_VARIABLES)
+"""Columns of a history record (time first)."""
+COL_TIME = 0
+COL_DT = HISTORY_COLUMN["dt"]
+COL_ITERATIONS = HISTORY_COLUMN["iterations"]
+COL_ERROR = HISTORY_COLUMN["error"]
+COL_REJECTED = HISTORY_COLUMN["rejected_steps"]
+COL_EVALUATIONS = HISTORY_COLUMN["force_evaluations"]
+COL_POSITION = HISTORY_COLUMN["projectile_position"]
+COL_VELOCITY = HISTORY_COLUMN["projectile_velocity"]
+COL_OMEGA = HISTORY_COLUMN["angular_velocity"]
+COL_NOSE = HISTORY_COLUMN["projectile_nose"]
+COL_TILT = HISTORY_COLUMN["tilt"]
+COL_CONTACTS = HISTORY_COLUMN["contact_nodes"]
+COL_DEFLECTION = HISTORY_COLUMN["max_deflection"]
+COL_STRETCH = HISTORY_COLUMN["max_stretch"]
+COL_FABRIC_MOMENTUM = HISTORY_COLUMN["fabric_momentum"]
+COL_FABRIC_ANGULAR = HISTORY_COLUMN["fabric_angular_momentum"]
+COL_BODY_MOMENTUM = HISTORY_COLUMN["projectile_momentum"]
+COL_BODY_ANGULAR = HISTORY_COLUMN["projectile_angular_momentum"]
+COL_KE_BODY = HISTORY_COLUMN["kinetic_energy_projectile"]
+COL_KE_BODY_ROTATION = HISTORY_COLUMN["kinetic_energy_projectile_rotation"]
+COL_KE_FABRIC = HISTORY_COLUMN["kinetic_energy_fabric"]
+COL_STRAIN = HISTORY_COLUMN["strain_energy"]
+COL_BROKEN = HISTORY_COLUMN["broken_yarns"]
+COL_MIN_DAMAGE = HISTORY_COLUMN["min_damage"]
+COL_ENERGY_TERMS = HISTORY_COLUMN[ENERGY_TERMS[0]]
+COL_BALANCE = HISTORY_COLUMN["energy_balance_error"]
+COL_YAW = HISTORY_COLUMN["yaw"]
+COL_CONTACT_FORCE = HISTORY_COLUMN["contact_force"]
+
 MATERIAL_KSV, MATERIAL_FUNG = 0, 1
 REGION_UNIFORM, REGION_HALF_SPACE = 0, 1
 SHAPE_SPHERE, SHAPE_OGIVE, SHAPE_CYLINDER, SHAPE_FSP = 0, 1, 2, 3
@@ -194,6 +259,24 @@ class Solver(NamedTuple):
     the paper's initial iterate)."""
 
 
+class StepStats(NamedTuple):
+    """What a history record says about the step that led to a state."""
+
+    t: float
+    """Time [s]."""
+    dt: float
+    """The step just taken [s]."""
+    iterations: int
+    error: float
+    """ϖ at acceptance."""
+    rejected: int
+    """Rejected attempts so far."""
+    evaluations: int
+    """Force evaluations so far."""
+    contacts: int
+    """Contacts after the step."""
+
+
 class Physics(NamedTuple):
     """Everything a kernel reads about the model, by name."""
 
@@ -234,7 +317,9 @@ class Work(NamedTuple):
     cand: np.ndarray
     """Contact candidates (node indices); their count in counts[0]."""
     flag: np.ndarray
-    """1 for contact candidates, 2 for those in contact earlier in this step (uint8)."""
+    """Per node (uint8): 0 not a contact candidate, 1 a candidate not in contact, contact.STICK
+    or contact.SLIDE for one in contact at the latest iterate. The node kernel leaves every
+    non-zero node out of the fabric's error measure (candidates are measured after contact)."""
     seg_cand: np.ndarray
     """Candidate segments for segment contact; their count in counts[1]."""
     seg_active: np.ndarray
@@ -277,6 +362,9 @@ class Work(NamedTuple):
     it always."""
     damage_alpha: np.ndarray
     """The α each damage_thr was computed for (NaN: not yet)."""
+    body_scratch: np.ndarray
+    """The body update's workspace, (7, 3): rows 0–2 the rotation increment, rows 3–6 the
+    inertia solve (vec3.solve3)."""
 
 
 def make_work(nx: int, ny: int, seg_count: int = 0) -> Work:
@@ -296,4 +384,4 @@ def make_work(nx: int, ny: int, seg_count: int = 0) -> Work:
                 np.empty((2, nmax)), np.empty((3, nmax)), np.empty((3, nmax)),
                 np.empty((3, nmax)), np.zeros((6, n)), np.empty(nmax), np.zeros((2, 3)),
                 np.zeros(ny * (nx - 1) + nx * (ny - 1)),
-                np.full(ny * (nx - 1) + nx * (ny - 1), np.nan))
+                np.full(ny * (nx - 1) + nx * (ny - 1), np.nan), np.zeros((7, 3)))

@@ -25,7 +25,14 @@ import math
 
 from numba import njit
 
-from emfabric._kernels.records import SHAPE_CYLINDER, SHAPE_FSP, SHAPE_OGIVE, SHAPE_SPHERE
+from emfabric._kernels.records import (
+    BODY_R0,
+    BODY_X,
+    SHAPE_CYLINDER,
+    SHAPE_FSP,
+    SHAPE_OGIVE,
+    SHAPE_SPHERE,
+)
 from emfabric._kernels.vec3 import from_shape_frame, to_shape_frame
 
 
@@ -189,3 +196,19 @@ def pressing_point(body, rot, m, h):
 
 SHAPES = {"sphere": SHAPE_SPHERE, "ogive": SHAPE_OGIVE, "cylinder": SHAPE_CYLINDER,
           "fsp": SHAPE_FSP}
+
+
+@njit(cache=True)
+def nodes_inside(x, inv_mass, flag, body, b_state):
+    """Free nodes (inv_mass > 0) with flag 0 inside the body in state b_state (BODY_ROWS, 3):
+    after a step, nodes that were no contact candidates (must be none); before a run, every
+    node (flag all 0, inv_mass all 1: the start must be clear of the sheet)."""
+    count = 0
+    centre = b_state[BODY_X]
+    rot = b_state[BODY_R0:BODY_R0 + 3]
+    for n in range(x.shape[1]):
+        if flag[n] == 0 and inv_mass[n] > 0.0:
+            d = (x[0, n] - centre[0], x[1, n] - centre[1], x[2, n] - centre[2])
+            if is_inside(body, rot, d):
+                count += 1
+    return count

@@ -28,12 +28,15 @@ from emfabric._kernels.fields import (
 )
 from emfabric._kernels.materials import damage_thresholds
 from emfabric._kernels.nodes import fused_iterate, fused_iterate_threads
-from emfabric._kernels.records import BODY_R0, BODY_V, BODY_W, BODY_X
-from emfabric._kernels.shapes import bounding_radius, is_inside
+from emfabric._kernels.records import BODY_V, BODY_W, BODY_X, StateArrays
+from emfabric._kernels.shapes import bounding_radius, nodes_inside
 from emfabric._kernels.sums import fsum
 from emfabric._kernels.vec3 import copy_into, norm
 
-CONVERGED, NOT_CONVERGED, NOT_FINITE, CONTACT_MISSED = 0, 1, 2, 3
+CONVERGED, NOT_CONVERGED, NOT_FINITE, CONTACT_MISSED, BODY_NOT_CONVERGED = 0, 1, 2, 3, 4
+"""Status of an attempted step: accepted; ϖ above tolerance after the iteration limit; a
+non-finite value; a free node found inside the body that was no contact candidate; the body's
+rotation (eq. B16) not converged within body.BODY_ITERATION_LIMIT at the last iterate."""
 
 
 @njit(cache=True)
@@ -51,20 +54,6 @@ def _reaction_sums(nc, c_imp, c_arm, buf, imp_force, imp_moment):
 
 
 @njit(cache=True)
-def _nodes_inside(x, inv_mass, flag, body, b_state):
-    """Free nodes inside the body that were not contact candidates (must be none)."""
-    count = 0
-    centre = b_state[BODY_X]
-    rot = b_state[BODY_R0:BODY_R0 + 3]
-    for n in range(x.shape[1]):
-        if flag[n] == 0 and inv_mass[n] > 0.0:
-            d = (x[0, n] - centre[0], x[1, n] - centre[1], x[2, n] - centre[2])
-            if is_inside(body, rot, d):
-                count += 1
-    return count
-
-
-@njit(cache=True)
 def _predict(x0, v0, f0, inv_mass, phi, dt, out):
     """The initial iterate x0 + Δt v0 + φΔt² ψ(t)/m: the φ-update with the start-of-step forces
     (an explicit predictor; the iteration then starts O(Δt³) from its fixed point, not O(Δt))."""
@@ -75,11 +64,10 @@ def _predict(x0, v0, f0, inv_mass, phi, dt, out):
 
 
 @njit(cache=True, inline="always")
-def fabric_iterate(phys, prev, sin, skip_err, cur, v1, f1, alpha_t, work, rowbuf, threads, t1,
-                   phi, dt):
+def fabric_iterate(phys, prev, sin, sout, work, rowbuf, threads, t1, phi, dt):
     """One force evaluation + node update: yarn tensions and damage at the iterate `prev`, then
-    the φ-update of every node from the start state sin into (cur, v1, f1), trial damage into
-    alpha_t; the field is taken at time t1 = t + Δt.
+    the φ-update of every node from the start state sin into sout (x, v, f; trial damage into
+    sout.alpha); the field is taken at time t1 = t + Δt.
 
     Exactly one of rowbuf, threads is an array, the other None: rowbuf (ROWBUF_ROWS, nx + 1)
     runs the serial kernel, threads (blocks, ROWBUF_ROWS, nx + 1) the threaded one.
@@ -90,16 +78,9 @@ def fabric_iterate(phys, prev, sin, skip_err, cur, v1, f1, alpha_t, work, rowbuf
     is most of the first run's compile time)."""
     if rowbuf is None:
         if threads is not None:
-            fused_iterate_threads(phys.nodes, phys.yarns, phys.material, phys.field,
-                                  work.node_field, prev, sin.x, sin.v, sin.f, sin.alpha, alpha_t,
-                                  work.damage_thr, cur, v1, f1, skip_err,
-                                  work.err_rows, work.err_num, work.err_den, t1, phi, dt,
-                                  threads)
+            fused_iterate_threads(phys, prev, sin, sout, work, t1, phi, dt, threads)
     else:
-        fused_iterate(phys.nodes, phys.yarns, phys.material, phys.field, work.node_field,
-                      prev, sin.x, sin.v, sin.f, sin.alpha, alpha_t, work.damage_thr, cur, v1,
-                      f1, skip_err, work.err_rows,
-                      work.err_num, work.err_den, t1, phi, dt, rowbuf)
+        fused_iterate(phys, prev, sin, sout, work, t1, phi, dt, rowbuf)
 
 
 @njit(cache=True, nogil=True)
@@ -176,6 +157,7 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
     err = 1.0
     nc = 0
     k = 0
+    body_ok = True
     for k in range(1, kmax + 1):
         if accel is not None:
             prev = accel[0]
@@ -183,8 +165,8 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
         else:
             prev = xbuf if k % 2 == 1 else x1
             cur = x1 if k % 2 == 1 else xbuf
-        fabric_iterate(phys, prev, sin, flag, cur, v1, f1, alpha_t, work, rowbuf, threads, t1,
-                       phi, dt)
+        fabric_iterate(phys, prev, sin, StateArrays(cur, v1, f1, alpha_t, b_out, sout.e), work,
+                       rowbuf, threads, t1, phi, dt)
         num_b = 0.0
         den_b = 0.0
         if body.active:
@@ -195,8 +177,8 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
                                      cur, v1, work)
             candidate_errors(nodes.nx, ncand, work.cand, x0, prev, cur, err_rows)
             _reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, imp_force, imp_moment)
-            num_b, den_b = body_update(body, phys.field, b_in, b_out, t1, phi, dt, imp_force,
-                                       imp_moment, tol)
+            num_b, den_b, body_ok = body_update(body, phys.field, b_in, b_out, t1, phi, dt,
+                                                work.reaction, work.body_scratch, tol)
         # error measure, eq. 3.10 step 5a (fabric), and the same for the body
         num = 0.0
         den = 0.0
@@ -223,7 +205,9 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
         copy_into(x1, xbuf)
     if err > tol:
         return NOT_CONVERGED, k, err, nc
-    if body.active and _nodes_inside(x1, inv_mass, flag, body, b_out) > 0:
+    if not body_ok:
+        return BODY_NOT_CONVERGED, k, err, nc
+    if body.active and nodes_inside(x1, inv_mass, flag, body, b_out) > 0:
         return CONTACT_MISSED, k, err, nc
     # the electric field in the new state's forces (the energy bookkeeping's field work)
     electric_at_nodes(phys.field, work.node_field, x1, t1, sout.e)

@@ -10,7 +10,6 @@ those with loops are compiled once and called.
 
 import math
 
-import numpy as np
 from numba import njit
 
 
@@ -88,10 +87,14 @@ def solve_in_place(a, b, n):
 
 
 @njit(cache=True)
-def solve3(m, v):
-    """m⁻¹ · v for a 3 × 3 array m (partial pivoting), as a tuple."""
-    a = m.copy()
-    b = np.empty(3)
+def solve3(m, v, scratch):
+    """m⁻¹ · v for a 3 × 3 array m (partial pivoting), as a tuple; scratch (4, 3) is
+    overwritten (rows 0–2 the eliminated matrix, row 3 the solution)."""
+    a = scratch[0:3]
+    b = scratch[3]
+    for i in range(3):
+        for j in range(3):
+            a[i, j] = m[i, j]
     b[0], b[1], b[2] = v[0], v[1], v[2]
     solve_in_place(a, b, 3)
     return (b[0], b[1], b[2])
@@ -128,10 +131,10 @@ def world_inertia_times(rot, inertia_body, w):
 
 
 @njit(cache=True, inline="always")
-def world_inertia_solve(rot, inertia_body, h):
+def world_inertia_solve(rot, inertia_body, h, scratch):
     """Ī⁻¹·h for Ī = R I Rᵀ, as R(I⁻¹(Rᵀh)) (R orthogonal: the same system, solved in the body
-    frame)."""
-    return mat_vec(rot, solve3(inertia_body, mat_t_vec(rot, h)))
+    frame); scratch (4, 3) as solve3's."""
+    return mat_vec(rot, solve3(inertia_body, mat_t_vec(rot, h), scratch))
 
 
 @njit(cache=True, inline="always")

@@ -17,6 +17,7 @@ from emfabric._kernels.energy import step_energy
 from emfabric._kernels.nodes import ROWBUF_ROWS, ROWS_PER_BLOCK
 from emfabric._kernels.records import Solver, make_work
 from emfabric._kernels.step import (
+    BODY_NOT_CONVERGED,
     CONTACT_MISSED,
     CONVERGED,
     NOT_CONVERGED,
@@ -170,15 +171,18 @@ class Integrator:
             if status == NOT_CONVERGED:
                 factor = self.safety * step_factor(err, k, tol, k_d, self.p)
                 factor = min(factor, 0.9)
-            elif status == CONTACT_MISSED:
+            elif status in (CONTACT_MISSED, BODY_NOT_CONVERGED):
                 factor = 0.5
             else:  # NOT_FINITE
                 factor = 0.1
             rejected += 1
             dt *= factor
             if dt < self.dt_min:
-                what = "non-finite values" if status == NOT_FINITE else (
-                    f"ϖ = {err:.3g} after {k} iterations")
+                what = {NOT_FINITE: "non-finite values",
+                        CONTACT_MISSED: "a fabric node inside the projectile",
+                        BODY_NOT_CONVERGED: "the projectile's rotation (eq. B16) did not "
+                                            "converge in the body update"}.get(
+                    status, f"ϖ = {err:.3g} after {k} iterations")
                 self._fail(s_in, dt, f"step cannot converge even at Δt < dt_min = "
                            f"{self.dt_min:g} s ({what})")
         # accept: time advances by the step just taken

@@ -201,13 +201,13 @@ def check_geometry(model: Model, projectile) -> None:
     body within the sheet's extent."""
     if not model.has_body:
         return
-    from emfabric._kernels.step import _nodes_inside
+    from emfabric._kernels.shapes import nodes_inside
 
     state = np.zeros((BODY_ROWS, 3))
     state[BODY_X] = model.body_x0
     state[BODY_R0:BODY_R0 + 3] = np.eye(3)
     n = model.node_count
-    inside = _nodes_inside(model.nodes.x0, np.ones(n), np.zeros(n, dtype=np.uint8), model.body,
+    inside = nodes_inside(model.nodes.x0, np.ones(n), np.zeros(n, dtype=np.uint8), model.body,
                            state)
     x0 = model.nodes.x0
     geo = model.geometry

@@ -13,55 +13,70 @@ from typing import NamedTuple
 import numpy as np
 
 from emfabric._kernels import diagnostics as _k
+from emfabric._kernels.records import (
+    ENERGY_WORK_FIELD,
+    ENERGY_WORK_GRAVITY,
+    HISTORY_COLUMN,
+    HISTORY_COLUMNS,
+    HISTORY_VARIABLES,
+    StepStats,
+)
 from emfabric.sim.fastcall import Direct
 from emfabric.sim.model import Model
 from emfabric.sim.state import State
 from emfabric.sources.evaluate import fields_at
 
-# the history record: name -> (width, units, long name); width 3 means a (time, xyz) variable;
-# the column order of emfabric._kernels.diagnostics.history_row (column 0 is time)
-RECORD: dict[str, tuple[int, str, str]] = {
-    "dt": (1, "s", "accepted time step"),
-    "iterations": (1, "1", "fixed-point iterations of the accepted step"),
-    "error": (1, "1", "normalised iteration error at acceptance (eq. 3.10 step 5a)"),
-    "rejected_steps": (1, "1", "rejected attempts so far (cumulative)"),
-    "force_evaluations": (1, "1", "force evaluations so far (cumulative)"),
-    "projectile_position": (3, "m", "projectile centre of mass"),
-    "projectile_velocity": (3, "m s-1", "projectile centre-of-mass velocity"),
-    "angular_velocity": (3, "rad s-1", "projectile angular velocity (inertial frame)"),
-    "projectile_nose": (3, "m", "nose marker relative to the centre of mass"),
-    "tilt": (1, "rad", "tilt angle of the nose marker (eq. 5.2)"),
-    "contact_nodes": (1, "1", "fabric nodes in contact (plus yarn segments in contact, with "
+ATTRIBUTES: dict[str, tuple[str, str]] = {
+    "dt": ("s", "accepted time step"),
+    "iterations": ("1", "fixed-point iterations of the accepted step"),
+    "error": ("1", "normalised iteration error at acceptance (eq. 3.10 step 5a)"),
+    "rejected_steps": ("1", "rejected attempts so far (cumulative)"),
+    "force_evaluations": ("1", "force evaluations so far (cumulative)"),
+    "projectile_position": ("m", "projectile centre of mass"),
+    "projectile_velocity": ("m s-1", "projectile centre-of-mass velocity"),
+    "angular_velocity": ("rad s-1", "projectile angular velocity (inertial frame)"),
+    "projectile_nose": ("m", "nose marker relative to the centre of mass"),
+    "tilt": ("rad", "tilt angle of the nose marker (eq. 5.2)"),
+    "contact_nodes": ("1", "fabric nodes in contact (plus yarn segments in contact, with "
                               "segment contact on)"),
-    "max_deflection": (1, "m", "largest out-of-plane node displacement"),
-    "max_stretch": (1, "1", "largest stretch U = L/L0 of the yarns not broken"),
-    "fabric_momentum": (3, "kg m s-1", "linear momentum of the fabric"),
-    "fabric_angular_momentum": (3, "kg m2 s-1", "angular momentum of the fabric about the origin"),
-    "projectile_momentum": (3, "kg m s-1", "linear momentum of the projectile"),
-    "projectile_angular_momentum": (3, "kg m2 s-1",
+    "max_deflection": ("m", "largest out-of-plane node displacement"),
+    "max_stretch": ("1", "largest stretch U = L/L0 of the yarns not broken"),
+    "fabric_momentum": ("kg m s-1", "linear momentum of the fabric"),
+    "fabric_angular_momentum": ("kg m2 s-1", "angular momentum of the fabric about the origin"),
+    "projectile_momentum": ("kg m s-1", "linear momentum of the projectile"),
+    "projectile_angular_momentum": ("kg m2 s-1",
                                     "angular momentum of the projectile about the origin"),
-    "kinetic_energy_projectile": (1, "J", "projectile kinetic energy (translation + rotation)"),
-    "kinetic_energy_projectile_rotation": (1, "J", "projectile rotational kinetic energy"),
-    "kinetic_energy_fabric": (1, "J", "fabric kinetic energy"),
-    "strain_energy": (1, "J", "stored yarn energy (damaged)"),
-    "broken_yarns": (1, "1", "yarns with damage α below fabric.damage.broken_below"),
-    "min_damage": (1, "1", "smallest yarn damage variable α (1 intact)"),
-    "work_field": (1, "J", "work of the electric field on fabric and projectile (cumulative)"),
-    "work_gravity": (1, "J", "work of gravity (cumulative)"),
-    "dissipation_friction": (1, "J", "energy dissipated by friction impulses (cumulative)"),
-    "dissipation_contact": (1, "J", "energy dissipated by normal contact impulses (cumulative)"),
-    "dissipation_projection": (1, "J", "work lost in contact position projections (cumulative)"),
-    "dissipation_damage": (1, "J", "energy released by yarn damage (cumulative)"),
-    "energy_balance_error": (1, "J", "kinetic + strain + dissipated − work − initial energy"),
-    "yaw": (1, "rad", "angle between the projectile's axis (nose marker) and its velocity"),
-    "contact_force": (3, "N", "total contact + friction force on the projectile (mean over "
+    "kinetic_energy_projectile": ("J", "projectile kinetic energy (translation + rotation)"),
+    "kinetic_energy_projectile_rotation": ("J", "projectile rotational kinetic energy"),
+    "kinetic_energy_fabric": ("J", "fabric kinetic energy"),
+    "strain_energy": ("J", "stored yarn energy (damaged)"),
+    "broken_yarns": ("1", "yarns with damage α below fabric.damage.broken_below"),
+    "min_damage": ("1", "smallest yarn damage variable α (1 intact)"),
+    "work_field": ("J", "work of the electric field on fabric and projectile (cumulative)"),
+    "work_gravity": ("J", "work of gravity (cumulative)"),
+    "dissipation_friction": ("J", "energy dissipated by friction impulses (cumulative)"),
+    "dissipation_contact": ("J", "energy dissipated by normal contact impulses (cumulative)"),
+    "dissipation_projection": ("J", "work lost in contact position projections (cumulative)"),
+    "dissipation_damage": ("J", "energy released by yarn damage (cumulative)"),
+    "energy_balance_error": ("J", "kinetic + strain + dissipated − work − initial energy"),
+    "yaw": ("rad", "angle between the projectile's axis (nose marker) and its velocity"),
+    "contact_force": ("N", "total contact + friction force on the projectile (mean over "
                               "the step)"),
-    "field_B": (3, "T", "magnetic field at the projectile's centre of mass (the sheet's centre "
+    "field_B": ("T", "magnetic field at the projectile's centre of mass (the sheet's centre "
                         "without a projectile)"),
-    "field_E": (3, "V m-1", "electric field there (the induced E of a pulsed coil included)"),
+    "field_E": ("V m-1", "electric field there (the induced E of a pulsed coil included)"),
 }
-COLUMNS = 1 + sum(w for w, _u, _l in RECORD.values())
+"""Units and long name of each history variable (netCDF attributes)."""
+
+RECORD: dict[str, tuple[int, str, str]] = {
+    name: (width, *ATTRIBUTES[name]) for name, width in HISTORY_VARIABLES}
+"""The history record: name -> (width, units, long name); width 3 means a (time, xyz)
+variable. The columns are records.HISTORY_VARIABLES' (the layout the record kernel writes)."""
+COLUMNS = HISTORY_COLUMNS
 """Columns of a history record (time first)."""
+LAYOUT: dict[str, slice] = {name: slice(HISTORY_COLUMN[name], HISTORY_COLUMN[name] + width)
+                            for name, width in HISTORY_VARIABLES}
+"""Columns of each RECORD variable in a history row."""
 
 
 class FabricDiagnostics(NamedTuple):
@@ -104,10 +119,11 @@ def _record(model: Model, state: State, row: np.ndarray,
     centre = state.body_x if model.has_body else np.zeros(3)
     direct[0](None, model.physics, state.node_x, state.node_v, state.seg_alpha, centre,
               model.flight_direction, out)
-    e0 = direct[1](None, float(state.t), float(state.last_dt), int(state.iterations),
-                   float(state.error), int(state.rejected), int(state.evaluations),
-                   int(state.contact_count), state.body, model.body, out, state.energy,
-                   float(e_initial), state.contact_force, row)
+    step = StepStats(float(state.t), float(state.last_dt), int(state.iterations),
+                     float(state.error), int(state.rejected), int(state.evaluations),
+                     int(state.contact_count))
+    e0 = direct[1](None, step, state.body, model.body, out, state.energy, float(e_initial),
+                   state.contact_force, row)
     # the applied field where the projectile is: when a pulse rises, how strong it got
     e, b = fields_at(model.field, centre.reshape(1, 3), state.t)
     row[LAYOUT["field_B"]] = b[0]
@@ -177,8 +193,8 @@ def check_plausible(model: Model, state: State, row: np.ndarray, lim: Limits) ->
     if bad.any():
         names = [n for n, (w, _u, _l) in RECORD.items() if bad[LAYOUT[n]].any()]
         return f"non-finite values in {', '.join(names[:4])}"
-    energy_in = (abs(state.energy_initial) + abs(float(state.energy[0]))
-                 + abs(float(state.energy[1])) + ENERGY_FLOOR)
+    energy_in = (abs(state.energy_initial) + abs(float(state.energy[ENERGY_WORK_FIELD]))
+                 + abs(float(state.energy[ENERGY_WORK_GRAVITY])) + ENERGY_FLOOR)
     balance = float(row[LAYOUT["energy_balance_error"]][0])
     if abs(balance) > ENERGY_BALANCE_FRACTION * energy_in:
         return (f"energy balance error {balance:.3g} J exceeds "
@@ -198,15 +214,3 @@ def check_plausible(model: Model, state: State, row: np.ndarray, lim: Limits) ->
     if stretch > STRETCH_LIMIT:
         return f"yarn stretch U = {stretch:.3g} beyond the plausible {STRETCH_LIMIT:g}"
     return None
-
-
-def _layout() -> dict[str, slice]:
-    """Columns of each RECORD variable in a history row."""
-    out, col = {}, 1  # column 0 is time
-    for name, (width, _u, _l) in RECORD.items():
-        out[name] = slice(col, col + width)
-        col += width
-    return out
-
-
-LAYOUT = _layout()

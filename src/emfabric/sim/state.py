@@ -21,20 +21,11 @@ from emfabric._kernels.records import (
     BODY_V,
     BODY_W,
     BODY_X,
+    ENERGY_TERMS,
     StateArrays,
     make_work,
 )
 from emfabric.sim.model import Model
-
-# cumulative energy terms [J], in the order of State.energy
-ENERGY_TERMS = (
-    "work_field",
-    "work_gravity",
-    "dissipation_friction",
-    "dissipation_contact",
-    "dissipation_projection",
-    "dissipation_damage",
-)
 
 
 @dataclass(eq=False)
@@ -141,15 +132,16 @@ def update_forces(model: Model, state: State) -> None:
 
     The node update with Δt = 0 and φ = 1 returns v1 = v and ψ in its force output."""
     m = model
-    n = m.node_count
     scratch = state.copy()
     work = make_work(m.nx, m.ny, m.seg_count if m.physics.contact.segments else 0)
+    work.flag[:] = 1  # no error measure here
     fill_node_fields(m.field, state.node_x, state.node_v, 0.0, state.t, work.node_field)
-    fused_iterate(m.nodes, m.yarns, m.material, m.field, work.node_field, state.node_x,
-                  state.node_x, state.node_v, np.zeros_like(state.node_f), state.seg_alpha,
-                  scratch.seg_alpha, work.damage_thr, scratch.node_x, scratch.node_v,
-                  state.node_f, np.ones(n, dtype=np.uint8), work.err_rows, work.err_num,
-                  work.err_den, state.t, 1.0, 0.0, np.empty((ROWBUF_ROWS, m.nx + 1)))
+    start = StateArrays(state.node_x, state.node_v, np.zeros_like(state.node_f),
+                        state.seg_alpha, state.body, state.node_e)
+    out = StateArrays(scratch.node_x, scratch.node_v, state.node_f, scratch.seg_alpha,
+                      scratch.body, scratch.node_e)
+    fused_iterate(m.physics, state.node_x, start, out, work, state.t, 1.0, 0.0,
+                  np.empty((ROWBUF_ROWS, m.nx + 1)))
     electric_at_nodes(m.field, work.node_field, state.node_x, state.t, state.node_e)
     if m.has_body:
         b = state.body

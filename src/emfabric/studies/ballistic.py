@@ -5,8 +5,8 @@ of the residual speeds above it, and V50 with its spread from seeded shots
 A shot perforates when its run ends by perforation (the projectile past every node, moving
 away), or reaches `end_time` moving forward past the sheet's plane and clear of the fabric
 (emfabric.runner.summary.perforated); a shot still in contact at end_time has not perforated
-*within end_time*: V_BL is the lowest speed that perforates within the scenario's end_time (the shipped
-``rupture`` scenario runs 3 ms, long enough for a stopped sphere to rebound).
+*within end_time*: V_BL is the lowest speed that perforates within the scenario's end_time
+(the shipped ``rupture`` scenario runs 3 ms, long enough for a stopped sphere to rebound).
 
 Lambert–Jonas: v_r = a (v_s^p − V_BL^p)^{1/p} for v_s > V_BL, 0 below (SciPy least squares).
 V50: the logistic P(perforation | v) = 1 / (1 + exp(−(v − V50)/s)) fitted by maximum
