@@ -214,3 +214,16 @@ def test_optional_dependencies_stay_optional():
                 if name.split(".")[0] in ("scipy", "magpylib", "dask", "distributed"):
                     where = (_module(path), owner.get(node))
                     assert where in allowed, f"{path.name} imports {name} in {where[1]}"
+
+
+def test_compiled_functions_take_at_most_twelve_parameters():
+    """A kernel that takes more than 12 loose arguments is missing a record (DESIGN.md)."""
+    long = []
+    for path in sorted(KERNELS.glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.FunctionDef) and any(
+                    ast.unparse(d).split("(")[0].split(".")[-1] in ("njit", "jit", "overload")
+                    for d in node.decorator_list):
+                if len(node.args.args) > 12:
+                    long.append(f"{path.name}: {node.name} ({len(node.args.args)})")
+    assert not long, long

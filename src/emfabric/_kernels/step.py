@@ -140,12 +140,9 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
             fill_node_fields_threads(phys.field, x0, v0, dt, t1, work.node_field)
         else:
             fill_node_fields(phys.field, x0, v0, dt, t1, work.node_field)
-    # iterate K-1 is read from `prev`, iterate K written to `cur`; iterate 0 is x0 (ϖ_0 = 1).
-    # Plain fixed point: prev and cur alternate between xbuf and x1. Anderson: cur is always
-    # x1 = G(prev) and the next prev is the mixed iterate in accel[0]. accel is None for the
-    # plain fixed point: Numba then drops the Anderson branches when it compiles this kernel.
     # where the damage law can change α this attempt (materials.damage_thresholds)
     damage_thresholds(sin.alpha, phys.material, work.damage_thr, work.damage_alpha)
+    # the initial iterate: the start-of-step state (the paper's, ϖ_0 = 1) or the prediction
     if solver.predict:
         _predict(x0, v0, sin.f, inv_mass, phi, dt, xbuf)
         for c in range(3):
@@ -154,6 +151,10 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
         copy_into(xbuf, x0)
     if accel is not None:
         copy_into(accel[0], xbuf)
+    # iterate K-1 is read from `prev`, iterate K written to `cur`. Plain fixed point: prev and
+    # cur alternate between xbuf and x1. Anderson: cur is always x1 = G(prev) and the next prev
+    # is the mixed iterate in accel[0]. accel is None for the plain fixed point: Numba then
+    # drops the Anderson branches when it compiles this kernel.
     err = 1.0
     nc = 0
     k = 0
