@@ -172,8 +172,8 @@ def iterate_args(integ, s, s2, dt: float) -> tuple:
     work.xbuf[:] = s.node_x
     # as an attempt does: where the damage law can change α (the kernel skips it elsewhere)
     damage_thresholds(s.seg_alpha, integ.physics.material, work.damage_thr, work.damage_alpha)
-    return (integ.physics, work.xbuf, s.arrays, work.flag, s2.node_x, s2.node_v, s2.node_f,
-            s2.seg_alpha, work, integ.rowbuf, integ.threads, s.t + dt, integ.solver.phi, dt)
+    return (integ.physics, work.xbuf, s.arrays, s2.arrays, work, integ.rowbuf, integ.threads,
+            s.t + dt, integ.solver.phi, dt)
 
 
 @functools.cache
@@ -184,11 +184,9 @@ def _compiled_repeat():
     from emfabric._kernels.step import fabric_iterate
 
     @njit
-    def repeat(count, phys, prev, start, skip_err, cur, v1, f1, alpha_t, work, rowbuf, threads,
-               t1, phi, dt):
+    def repeat(count, phys, prev, start, out, work, rowbuf, threads, t1, phi, dt):
         for _ in range(count):
-            fabric_iterate(phys, prev, start, skip_err, cur, v1, f1, alpha_t, work, rowbuf,
-                           threads, t1, phi, dt)
+            fabric_iterate(phys, prev, start, out, work, rowbuf, threads, t1, phi, dt)
 
     return repeat
 

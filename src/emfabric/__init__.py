@@ -24,9 +24,9 @@ from emfabric.config.scenario import (
 # the simulator (Numba kernels) loads on first use, so that plotting never imports it
 _LAZY = {
     "build_model": "emfabric.sim.builder",
-    "DivergenceError": "emfabric.integrators.phi",
-    "Integrator": "emfabric.integrators.phi",
-    "StepInfo": "emfabric.integrators.phi",
+    "DivergenceError": "emfabric.integrators",
+    "Integrator": "emfabric.integrators",
+    "StepInfo": "emfabric.integrators",
     "Model": "emfabric.sim.model",
     "State": "emfabric.sim.state",
     "RunResult": "emfabric.runner.loop",

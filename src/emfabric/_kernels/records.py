@@ -45,7 +45,8 @@ HISTORY_VARIABLES = (
 )
 """The history record's variables and widths (3: an xyz vector), in the order of its columns
 after the time (column 0): the one layout the record kernel (diagnostics.history_row) writes and
-the recorder (emfabric.io.history) reads."""
+the recorder (emfabric.io.history) reads. The last two, the applied field at the projectile, are
+filled after the kernel by emfabric.sim.diagnostics (the field sources' Python side)."""
 
 
 def _history_columns() -> dict[str, int]:
@@ -88,6 +89,8 @@ COL_ENERGY_TERMS = HISTORY_COLUMN[ENERGY_TERMS[0]]
 COL_BALANCE = HISTORY_COLUMN["energy_balance_error"]
 COL_YAW = HISTORY_COLUMN["yaw"]
 COL_CONTACT_FORCE = HISTORY_COLUMN["contact_force"]
+COL_FIELD_B = HISTORY_COLUMN["field_B"]
+COL_FIELD_E = HISTORY_COLUMN["field_E"]
 
 MATERIAL_KSV, MATERIAL_FUNG = 0, 1
 REGION_UNIFORM, REGION_HALF_SPACE = 0, 1

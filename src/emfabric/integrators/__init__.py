@@ -5,7 +5,8 @@
   eq. 3.9.
 
 A scheme owns its update, its step-size rule and its bookkeeping; the forces, contact law and
-body update are the kernels' (emfabric._kernels). May import: sim, config, _kernels.
+body update are the kernels' (emfabric._kernels). May import: sim, _kernels (the numerical
+settings come as model.options, never from the scenario).
 """
 
 from emfabric.integrators.base import DivergenceError, StepInfo

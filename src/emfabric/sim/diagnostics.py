@@ -14,6 +14,8 @@ import numpy as np
 
 from emfabric._kernels import diagnostics as _k
 from emfabric._kernels.records import (
+    COL_FIELD_B,
+    COL_FIELD_E,
     ENERGY_WORK_FIELD,
     ENERGY_WORK_GRAVITY,
     HISTORY_COLUMN,
@@ -126,8 +128,8 @@ def _record(model: Model, state: State, row: np.ndarray,
                    state.contact_force, row)
     # the applied field where the projectile is: when a pulse rises, how strong it got
     e, b = fields_at(model.field, centre.reshape(1, 3), state.t)
-    row[LAYOUT["field_B"]] = b[0]
-    row[LAYOUT["field_E"]] = e[0]
+    row[COL_FIELD_B:COL_FIELD_B + 3] = b[0]
+    row[COL_FIELD_E:COL_FIELD_E + 3] = e[0]
     return FabricDiagnostics._make(out.tolist()), float(e0)
 
 

@@ -4,6 +4,5 @@ grid that precomputes coils and magnets over the region the fabric can reach, th
 points outside a run, the field figure's samples, and field design's scaling of the sources.
 
 The field inside the kernels is emfabric._kernels.fields (``field_at``) and
-emfabric._kernels.coils (the loop's closed forms). May import: config, _kernels, and
-sim.geometry (the projectile's start, for the field figure).
+emfabric._kernels.coils (the loop's closed forms). May import: config, _kernels.
 """

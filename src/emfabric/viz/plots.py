@@ -339,8 +339,7 @@ def _field_overlay(ax, histories: Sequence[xr.Dataset]) -> None:
 
 
 def _dissipated(ds: xr.Dataset) -> np.ndarray:
-    return sum(ds[v].values for v in ("dissipation_friction", "dissipation_contact",
-                                      "dissipation_projection", "dissipation_damage"))
+    return sum(ds[v].values for v in ds.data_vars if v.startswith("dissipation_"))
 
 
 def energy_figure(histories: Sequence[xr.Dataset] | xr.Dataset,
