@@ -227,3 +227,36 @@ def test_compiled_functions_take_at_most_twelve_parameters():
                 if len(node.args.args) > 12:
                     long.append(f"{path.name}: {node.name} ({len(node.args.args)})")
     assert not long, long
+
+
+def test_no_class_name_defined_twice():
+    """One name, one concept: no two classes of the package share a name (the scenario's
+    [contact] table is ContactSpec, the kernels' record Contact)."""
+    seen: dict[str, str] = {}
+    twice = []
+    for path in sorted(SRC.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ClassDef):
+                where = str(path.relative_to(SRC))
+                if node.name in seen:
+                    twice.append(f"{node.name}: {seen[node.name]} and {where}")
+                seen[node.name] = where
+    assert not twice, twice
+
+
+def test_layer_docstrings_say_what_the_test_allows():
+    """Each layer's __init__ docstring names, after "May import:", exactly the layers LAYERS
+    allows it (config and _kernels: none; cli: all)."""
+    names = "|".join(sorted(LAYERS, key=len, reverse=True))
+    for layer, allowed in LAYERS.items():
+        doc = ast.get_docstring(ast.parse((SRC / layer / "__init__.py").read_text("utf-8")))
+        assert doc, f"{layer}/__init__.py has no docstring"
+        if layer == "cli":
+            assert "May import every other layer" in doc
+            continue
+        if not allowed:
+            assert re.search(r"[Ii]mports? (nothing|only)", doc), f"{layer}: {doc[:80]}"
+            continue
+        said = doc.split("May import:")[1].split(".")[0]
+        named = {m for m in re.findall(rf"(?<![\w.])({names})(?![\w])", said)}
+        assert named == allowed, f"{layer}: the docstring names {named}, the test {allowed}"

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from emfabric._kernels.records import BODY_X
 from emfabric.runner.loop import run
 
 from conftest import make
@@ -35,20 +36,48 @@ def _oblique(dt):
     })
 
 
-def test_momentum_conserved_free_edges():
-    """Case 3: free fabric, no field, oblique off-centre hit with spin. Linear momentum of
-    fabric + projectile is conserved to round-off; angular momentum to a discretisation error
-    that shrinks with Δt (the trapezoidal rule and the contact projection are not exactly
-    angular-momentum conserving)."""
-    ds = run(_oblique(2e-7)).history
-    assert int(ds.contact_nodes.max()) > 3
+def _oblique_run(dt):
+    """The oblique impact at Δt: total linear and angular momentum per record, and which steps
+    changed the set of nodes in contact (a node in contact sits on the sphere, |r − c| = R)."""
+    sc = _oblique(dt)
+    radius = sc.projectile.radius
+    touching = [frozenset()]
+
+    def watch(state, _info):
+        gap = np.linalg.norm(state.node_x - state.body[BODY_X][:, None], axis=0) - radius
+        touching.append(frozenset(np.flatnonzero(np.abs(gap) < 1e-9 * radius).tolist()))
+
+    ds = run(sc, progress=watch).history
     p, ang = _momenta(ds)
-    assert np.abs(p - p[0]).max() < 1e-14 * np.abs(p[0]).max() * 10
-    drift = np.abs(ang - ang[0]).max() / np.abs(ang[0]).max()
-    assert drift < 5e-6
-    _, ang2 = _momenta(run(_oblique(1e-7)).history)
-    drift2 = np.abs(ang2 - ang2[0]).max() / np.abs(ang2[0]).max()
-    assert drift / drift2 > 1.5
+    changed = np.array([a != b for a, b in zip(touching[:-1], touching[1:], strict=True)])
+    return ds, p, ang, changed
+
+
+def test_momentum_conserved_free_edges():
+    """Case 3: linear momentum to round-off; angular momentum to a first-order error in Δt."""
+    # Free fabric, no field, oblique off-centre hit with spin. Each contact impulse J enters
+    # node and body with opposite signs (linear momentum exact), but the node's angular momentum
+    # changes by x̄ × J (trapezoidal rule: x̄ the step's mean position) while the body receives
+    # the moment about the end-of-step arm, which differs by half the step's relative
+    # displacement, O(Δt); the projection onto the surface moves a node without momentum. Over
+    # sustained contact that is O(Δt²) per step, O(Δt) in all, smooth in Δt: it halves with Δt.
+    # The steps where a node enters or leaves contact make O(Δt) errors too, but their size
+    # depends on where in the step the event falls, which changes with Δt (measured per halving
+    # from 2e-7 s: ratios 1.5, 2.4, 1.4); so the per-halving test is on the sustained-contact
+    # part, and the total is asked the same rate as a mean over three halvings.
+    dts = (2e-7, 1e-7, 5e-8, 2.5e-8)
+    sustained, total = [], []
+    for dt in dts:
+        ds, p, ang, changed = _oblique_run(dt)
+        assert int(ds.contact_nodes.max()) > 3 and changed.sum() > 10
+        assert np.abs(p - p[0]).max() < 1e-13 * np.abs(p[0]).max()
+        step = np.diff(ang, axis=0)
+        sustained.append(np.linalg.norm(step[~changed].sum(axis=0)))
+        total.append(np.linalg.norm(ang - ang[0], axis=1).max() / np.linalg.norm(ang[0]))
+    rates = [sustained[i] / sustained[i + 1] for i in range(len(dts) - 1)]
+    assert min(rates) >= 1.8, (sustained, rates)
+    mean_rate = (total[0] / total[-1]) ** (1 / (len(dts) - 1))
+    assert mean_rate >= 1.8, (total, mean_rate)
 
 
 @pytest.mark.parametrize("n,end", [(31, 30e-6), (100, 12e-6)])

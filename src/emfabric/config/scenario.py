@@ -10,10 +10,12 @@ from __future__ import annotations
 import ast
 import copy
 import json
+import re
 import tomllib
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from types import UnionType
+from typing import Annotated, Any, Literal, Union, get_args, get_origin
 
 import tomli_w
 from pydantic import (
@@ -350,6 +352,13 @@ class ContactSpec(_Section):
 
 
 class SolverSpec(_Section):
+    integrator: Literal["phi", "central-difference"] = "phi"
+    """Time integration: "phi" the paper's implicit φ-scheme (fixed-point iteration, adaptive Δt,
+    eq. 3.9) or "central-difference" (explicit, one force evaluation per step, Δt = courant ×
+    the stability limit of the current state)."""
+    courant: Annotated[float, Field(gt=0.0, le=1.0)] = 0.5
+    """central-difference: the fraction of the stable step (2/ω_max, ω_max² ≤ max 2Σk_t/m at the
+    current stretches) taken [-]."""
     scheme: Literal["fixed-point", "anderson"] = "fixed-point"
     """Solver of each φ-step: the paper's fixed-point iteration, or its Anderson acceleration."""
     predictor: Literal["start", "explicit"] = "start"
@@ -510,38 +519,204 @@ def _tomlable(obj: Any) -> Any:
 
 
 def _format_errors(err: ValidationError, source: str) -> str:
-    lines = [f"invalid scenario ({source}):"]
-    for e in err.errors():
-        path = ".".join(str(p) for p in e["loc"])
+    """One line per error: `key.path = value: what is allowed`, the path as the user wrote it.
+
+    A key of several forms (a union: "auto" or a boolean; a source table told apart by its
+    `kind`) gets one line listing every allowed form, not pydantic's line per member."""
+    lines: list[str | list] = [f"invalid scenario ({source}):"]
+    errors = err.errors()
+    found = [_locate(e["loc"]) for e in errors]
+    # a union whose value has one member's form (an error below that member's level, or its
+    # own rule between keys): that member's errors say what is wrong; the other members'
+    # "should be" lines are dropped
+    formed = [w.union_at is not None and (len(w.path) > w.union_at or e["type"] in _RULE_ERRORS)
+              for e, w in zip(errors, found, strict=True)]
+    deep = {tuple(w.path[:w.union_at]) for w, f in zip(found, formed, strict=True) if f}
+    merged: dict[tuple, list] = {}
+    for e, where, form in zip(errors, found, formed, strict=True):
+        path = ".".join(str(p) for p in where.path)
         value = e.get("input")
-        msg = e["msg"]
-        if e["type"] == "extra_forbidden":
-            parent = ".".join(str(p) for p in e["loc"][:-1])
-            allowed = _allowed_keys(parent)
-            msg = f"unknown key; allowed keys here: {', '.join(allowed)}"
-            lines.append(f"  {path}: {msg}")
-            continue
-        if e["type"] == "literal_error" and "expected" in e.get("ctx", {}):
-            msg = f"must be one of {e['ctx']['expected']}"
         shown = repr(value) if not isinstance(value, dict) else "{...}"
-        lines.append(f"  {path} = {shown}: {msg}")
-    return "\n".join(lines)
-
-
-def _allowed_keys(dotted_parent: str) -> list[str]:
-    model: type[BaseModel] = Scenario
-    for part in [p for p in dotted_parent.split(".") if p]:
-        if part.isdigit():
+        kind = e["type"]
+        if where.union_at is not None and not form:
+            key = tuple(where.path)
+            if key in deep:
+                continue
+            if key not in merged:  # one line for the whole union, where its first error was
+                merged[key] = [path, shown, []]
+                lines.append(merged[key])
+            merged[key][2] += [a for a in _allowed_forms(e) if a not in merged[key][2]]
             continue
-        field = model.model_fields.get(part)
-        if field is None:
-            return []
-        ann = field.annotation
-        sub = _model_in(ann)
-        if sub is None:
-            return []
-        model = sub
-    return sorted(model.model_fields)
+        if kind == "extra_forbidden":
+            parent = _locate(e["loc"][:-1]).type
+            allowed = sorted(parent.model_fields) if _is_model(parent) else []
+            lines.append(f"  {path}: unknown key; allowed keys here: {', '.join(allowed)}")
+            continue
+        msg = e["msg"]
+        tags = _tags(where.type, where.discriminator)
+        if kind in ("union_tag_not_found", "union_tag_invalid") and tags and \
+                isinstance(value, dict):
+            disc = where.discriminator
+            if kind == "union_tag_not_found":
+                lines.append(f"  {path}.{disc} = {shown}: Field required; allowed: "
+                             f"{_one_of(tags)}")
+            else:
+                lines.append(f"  {path}.{disc} = {value.get(disc)!r}: must be one of "
+                             f"{_one_of(tags)}")
+            continue
+        if kind == "literal_error" and "expected" in e.get("ctx", {}):
+            msg = f"must be one of {e['ctx']['expected']}"
+        elif kind in _TYPE_WORDS:
+            msg = f"Input should be {_TYPE_WORDS[kind]}"
+            if tags:
+                msg += f" with {where.discriminator} = {_one_of(tags)}"
+        lines.append(f"  {path} = {shown}: {msg}")
+    return "\n".join(line if isinstance(line, str) else
+                     f"  {line[0]} = {line[1]}: must be one of {_one_of(line[2])}"
+                     for line in lines)
+
+
+_RULE_ERRORS = ("value_error", "assertion_error")
+"""Errors of a schema's own rule (a validator): the value had the form its rule checks."""
+
+_TYPE_WORDS = {"model_type": "a table", "model_attributes_type": "a table",
+               "dict_type": "a table", "tuple_type": "an array", "list_type": "an array"}
+"""The scenario file's words for pydantic's container types."""
+
+_FORM_WORDS = {"bool_type": ["true", "false"], "int_type": ["an integer"],
+               "float_type": ["a number"], "string_type": ["a string"], **{
+                   k: [v] for k, v in _TYPE_WORDS.items()}}
+"""What a union member allows, by the type of its error when the value is not of its type."""
+
+
+def _allowed_forms(error: dict) -> list[str]:
+    """The forms one member of a union allows, from its error on the union's value."""
+    kind = error["type"]
+    if kind == "literal_error" and "expected" in error.get("ctx", {}):
+        # "'a', 'b' or 'c'": each quoted value
+        return re.split(r"(?:, | or )(?=['\"])", error["ctx"]["expected"])
+    if kind in _FORM_WORDS:
+        return _FORM_WORDS[kind]
+    rest = error["msg"].removeprefix("Input should be ")
+    if kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal",
+                "finite_number", "multiple_of"):
+        rest = f"a number {rest}"
+    return [rest]
+
+
+def _one_of(forms: list[str]) -> str:
+    """'a', 'b' or 'c'."""
+    return forms[0] if len(forms) == 1 else f"{', '.join(forms[:-1])} or {forms[-1]}"
+
+
+class _Where:
+    """An error's location resolved against the schema: the key path as written (pydantic's
+    union member labels and tags, such as `literal['auto']`, `bool` or `loop`, dropped), the
+    type found there, the discriminator key of a tagged union there, and `union_at`: the length
+    of the path at the innermost untagged union the location passed through (None: none)."""
+
+    def __init__(self, path: list, type_: Any, discriminator: str | None,
+                 union_at: int | None) -> None:
+        self.path, self.type, self.discriminator, self.union_at = (path, type_, discriminator,
+                                                                   union_at)
+
+
+def _locate(loc: tuple) -> _Where:
+    ann: Any = Scenario
+    disc: str | None = None
+    path: list = []
+    union_at = None
+    for part in loc:
+        ann, disc = _unwrap(ann, disc)
+        if _is_union(ann):
+            # a member's label or tag: pydantic's, not a key the user wrote; a tagged union
+            # validates only the member its tag names, others try every member
+            if disc is None:
+                union_at = len(path)
+            ann, disc = _member(ann, part, disc), None
+            continue
+        path.append(part)
+        ann, disc = _child(ann, part)
+    ann, disc = _unwrap(ann, disc)
+    return _Where(path, ann, disc, union_at)
+
+
+def _is_union(ann: Any) -> bool:
+    return get_origin(ann) in (Union, UnionType)
+
+
+def _is_model(ann: Any) -> bool:
+    return isinstance(ann, type) and issubclass(ann, BaseModel)
+
+
+def _members(ann: Any) -> list[Any]:
+    """A union's members; None is not one (an optional key's null is no form of its own)."""
+    return [a for a in get_args(ann) if a is not type(None)]
+
+
+def _unwrap(ann: Any, disc: str | None = None) -> tuple[Any, str | None]:
+    """The type without Annotated and Optional, and the discriminator of a tagged union."""
+    while True:
+        if get_origin(ann) is Annotated:
+            ann, *meta = get_args(ann)
+            for m in meta:
+                if isinstance(getattr(m, "discriminator", None), str):
+                    disc = m.discriminator
+        elif _is_union(ann) and len(_members(ann)) == 1:
+            ann = _members(ann)[0]
+        else:
+            return ann, disc
+
+
+def _child(ann: Any, part: Any) -> tuple[Any, str | None]:
+    """The type of a model's key or of a tuple's item (None: not in the schema)."""
+    if _is_model(ann) and isinstance(part, str) and part in ann.model_fields:
+        field = ann.model_fields[part]
+        disc = field.discriminator
+        return field.annotation, disc if isinstance(disc, str) else None
+    if get_origin(ann) is tuple and isinstance(part, int):
+        args = get_args(ann)
+        if len(args) == 2 and args[1] is Ellipsis:
+            return args[0], None
+        if 0 <= part < len(args):
+            return args[part], None
+    return None, None
+
+
+def _member(union: Any, label: Any, disc: str | None) -> Any:
+    """The member of a union that pydantic's loc label names: the table whose discriminator
+    takes that tag, or the type of that name (None: not known, the path below is kept)."""
+    for m in _members(union):
+        base, _ = _unwrap(m)
+        if disc is not None and _is_model(base) and disc in base.model_fields:
+            if label in get_args(base.model_fields[disc].annotation):
+                return base
+        elif getattr(base, "__name__", None) in _label_names(label):
+            return base
+    return None
+
+
+def _label_names(label: Any) -> set[str]:
+    """Type names a pydantic union member label may stand for: `Sub`, `tuple[float, float]`
+    (tuple), `constrained-float` (float), `function-after[_check(), Sub]` (Sub)."""
+    if not isinstance(label, str):
+        return set()
+    names = {label, label.split("[", 1)[0], label.rsplit("-", 1)[-1]}
+    if label.startswith("function-") and label.endswith("]"):
+        names |= _label_names(label[:-1].rsplit(", ", 1)[-1].split("[", 1)[-1])
+    return names
+
+
+def _tags(ann: Any, disc: str | None) -> list[str]:
+    """The tags a tagged union takes (its members' discriminator values), quoted."""
+    if disc is None or not _is_union(ann):
+        return []
+    tags = []
+    for m in _members(ann):
+        base, _ = _unwrap(m)
+        if _is_model(base) and disc in base.model_fields:
+            tags += [repr(t) for t in get_args(base.model_fields[disc].annotation)]
+    return tags
 
 
 def _model_in(ann: Any) -> type[BaseModel] | None:

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import logging
+import math
 import os
 
 import numpy as np
+from pydantic import BaseModel
 
 from emfabric._kernels.records import (
     BODY_R0,
@@ -73,8 +75,35 @@ def check_memory(scenario: Scenario) -> None:
 
 
 def build_model(scenario: Scenario) -> Model:
-    """Everything a step reads, from a validated scenario."""
+    """Everything a step reads, from a validated scenario.
+
+    A scenario whose numbers are valid one by one but so extreme that a quantity built from them
+    overflows (a yarn radius of 1e200 m: its area) is a ScenarioError naming that value."""
     check_memory(scenario)
+    try:
+        # overflow is checked below, on what was built: numpy's warnings would only repeat it
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+            model = _assemble(scenario)
+            part = non_finite_part(model)
+            problem = None if part is None else f"a non-finite {part}"
+            if problem is None:
+                check_geometry(model, scenario.projectile)
+                check_stability(model)
+    except (OverflowError, ZeroDivisionError, FloatingPointError) as err:
+        problem = ("an overflow" if isinstance(err, OverflowError) else
+                   "a division by zero" if isinstance(err, ZeroDivisionError) else
+                   f"a floating-point error ({err})")
+    if problem is not None:
+        raise extreme_value_error(scenario, problem)
+    outside = nodes_outside_map(model.field, model.nodes.x0)
+    if outside:
+        log.warning("%d of %d fabric nodes start outside the field map (they see no field "
+                    "from it there)", outside, model.node_count)
+    return model
+
+
+def _assemble(scenario: Scenario) -> Model:
+    """The Model of a scenario, not yet checked."""
     fab = scenario.fabric
     nx, ny = fab.nodes
     lx, ly = fab.size
@@ -186,13 +215,68 @@ def build_model(scenario: Scenario) -> Model:
         projectile_shape=pr.shape,
         scenario=scenario,
     )
-    check_geometry(model, pr)
-    check_stability(model)
-    outside = nodes_outside_map(model.field, node_x0)
-    if outside:
-        log.warning("%d of %d fabric nodes start outside the field map (they see no field "
-                    "from it there)", outside, n)
     return model
+
+
+def non_finite_part(model: Model) -> str | None:
+    """The first part of a model (record.field, or a start value) holding a number that is not
+    finite, e.g. "yarns.area"; None when every number is finite."""
+    parts = {f"{name}.{key}": value for name, record in model.physics._asdict().items()
+             for key, value in record._asdict().items()}
+    parts.update(body_x0=model.body_x0, body_v0=model.body_v0, body_w0=model.body_w0,
+                 node_v0=model.node_v0, flight_direction=model.flight_direction)
+    for name, value in parts.items():
+        if value is None or isinstance(value, bool | int | str):
+            continue
+        arr = np.asarray(value)
+        if arr.dtype.kind in "fc" and not np.isfinite(arr).all():
+            return name
+    return None
+
+
+def _numbers(value, key: str):
+    """(key, value, decades) of each number, vector or table of a scenario (section): decades =
+    |log10|x|| of its most extreme element (0 for 0); sources and charges by index."""
+    if isinstance(value, BaseModel):
+        for name in type(value).model_fields:
+            yield from _numbers(getattr(value, name), f"{key}.{name}" if key else name)
+    elif isinstance(value, tuple) and value and all(isinstance(v, BaseModel) for v in value):
+        for i, item in enumerate(value):
+            yield from _numbers(item, f"{key}[{i}]")
+    else:
+        flat = list(_flatten(value))
+        if flat:
+            # math.log10 takes ints of any size (a float() of them may overflow)
+            yield key, value, max(abs(math.log10(abs(x))) if x else 0.0 for x in flat)
+
+
+def _flatten(value):
+    if isinstance(value, tuple | list):
+        for v in value:
+            yield from _flatten(v)
+    elif isinstance(value, int | float) and not isinstance(value, bool):
+        yield value
+
+
+def _shown(value) -> str:
+    return str(_listed(value)) if isinstance(value, tuple) else repr(value)
+
+
+def _listed(value):
+    return [_listed(v) for v in value] if isinstance(value, tuple) else value
+
+
+def extreme_value_error(scenario: Scenario, problem: str) -> ScenarioError:
+    """The error for a model that is not finite (`problem`: what went wrong). Every number of a
+    scenario is finite (validated), so one is too extreme for what is computed from it; named is
+    the most extreme one, counted in decades away from 1 (the defaults lie within 1e-13 … 1e11,
+    and only a value some 100 decades out overflows a square, a product or a volume)."""
+    key, value, _ = max(_numbers(scenario, ""), key=lambda item: item[2])
+    return ScenarioError(
+        f"{key} = {_shown(value)}: building the model gives {problem}, and this is the "
+        f"scenario's most extreme value; allowed: a value of physical size (every quantity "
+        f"derived from it, such as an area, volume, mass, inertia or stiffness, and their "
+        f"inverses, must be a finite number: below about 1e308 in magnitude)")
 
 
 def check_geometry(model: Model, projectile) -> None:

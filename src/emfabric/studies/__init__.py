@@ -3,5 +3,5 @@
 returns the run summary. Dask and SciPy (the "studies" extra) are imported inside the functions
 that need them.
 
-May import: runner, sources, sim, io, viz (the studies' figures), config.
+May import: runner, sources, sim, io, viz (for their figures), config.
 """
