@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from emfabric._kernels.contact import node_contact
+from emfabric._kernels.contact import node_contact, reaction_sums
 from emfabric._kernels.records import (
     BODY_R0,
     BODY_ROWS,
@@ -16,7 +16,6 @@ from emfabric._kernels.records import (
     Nodes,
     make_work,
 )
-from emfabric._kernels.step import _reaction_sums
 
 R = 0.02
 
@@ -39,7 +38,7 @@ def _contact(x_node, v_node, centre=(0, 0, 0), vel=(0, 0, 0), omega=(0, 0, 0), m
                       False)
     f = np.zeros(3)
     m = np.zeros(3)
-    _reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, f, m)
+    reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, f, m)
     return nc, x1[:, 0], v1[:, 0], work.c_imp[:, 0].copy() if nc else np.zeros(3), f, m
 
 
@@ -152,6 +151,6 @@ def test_sticking_node_lands_where_its_phi_update_puts_it():
     assert moved > 0.5 * phi * dt * np.linalg.norm((v - v_trial) - ((v - v_trial) @ n) * n)
     # the normal impulse passes through the centre: only friction turns the sphere
     f, mo = np.zeros(3), np.zeros(3)
-    _reaction_sums(1, work.c_imp, work.c_arm, work.sum_buf, f, mo)
+    reaction_sums(1, work.c_imp, work.c_arm, work.sum_buf, f, mo)
     jt = work.c_imp[:, 0] - (work.c_imp[:, 0] @ n) * n
     np.testing.assert_allclose(mo, -np.cross(x, jt), rtol=1e-12, atol=1e-18)

@@ -1,25 +1,39 @@
-"""Where the compiled kernels live: a folder per kernel-source digest, never the package."""
+"""Where the compiled kernels live: a folder per kernel-source digest, never the package;
+chosen when a kernel first asks, not when the package is imported; Numba's private caching
+names that this relies on are checked."""
 
 import os
 import shutil
 import subprocess
 import sys
+import textwrap
+import time
 from pathlib import Path
 
+import numba
 import pytest
 
 import emfabric._kernels as kernels
 
 PROBE = ("import numpy as np, emfabric._kernels as k; from emfabric._kernels.sums import fsum; "
          "assert fsum(np.array([1e16, 1.0, -1e16]), 3) == 1.0; "
-         "print(k.CACHE_DIR); print(k.CACHE_PERSISTENT)")
+         "print(k.cache_dir()); print(k.cache_persistent())")
+
+
+def _env(env_extra: dict) -> dict:
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("NUMBA_CACHE_DIR", "NUMBA_CACHE_LOCATOR_CLASSES")}
+    env.update(env_extra)
+    return env
+
+
+def _run(code: str, env_extra: dict) -> str:
+    return subprocess.run([sys.executable, "-c", code], env=_env(env_extra), capture_output=True,
+                          text=True, check=True).stdout
 
 
 def _probe(env_extra: dict) -> tuple[Path, bool]:
-    env = {k: v for k, v in os.environ.items() if k != "NUMBA_CACHE_DIR"}
-    env.update(env_extra)
-    out = subprocess.run([sys.executable, "-c", PROBE], env=env, capture_output=True,
-                         text=True, check=True).stdout.split()
+    out = _run(PROBE, env_extra).split()
     return Path(out[0]), out[1] == "True"
 
 
@@ -76,24 +90,143 @@ def test_cached_kernels_do_not_depend_on_file_times(tmp_path):
         assert FunctionCache(fsum.py_func)._impl.locator.get_source_stamp() == stamp
     finally:
         os.utime(src, ns=(before.st_atime_ns, before.st_mtime_ns))
-    assert stamp == kernels.CACHE_DIR.name
+    assert stamp == f"kernels-{kernels.source_digest()}"
+    if kernels.cache_persistent():
+        assert stamp == kernels.cache_dir().name
 
 
 def test_parallel_kernels_are_not_cached_on_their_own():
     """A parallel kernel loaded from the cache must never be linked into a caller that is then
-    cached (the caller crashed when loaded in a later process): every parallel=True kernel
-    compiles with its caller instead (emfabric._kernels.nodes.fused_iterate_threads)."""
+    cached (the caller crashed when loaded in a later process): every parallel=True kernel that
+    another kernel calls compiles with its caller instead
+    (emfabric._kernels.nodes.fused_iterate_threads); one called from Python only (the source
+    grid's coils.loop_values_on_grid) may be cached."""
     import importlib
 
     from numba.core.caching import NullCache
     from numba.core.registry import CPUDispatcher
 
-    parallel = []
-    for src in sorted(kernels.KERNEL_DIR.glob("*.py")):
+    sources = {src: src.read_text(encoding="utf-8")
+               for src in sorted(kernels.KERNEL_DIR.glob("*.py")) if src.stem != "__init__"}
+    parallel, cached = set(), set()
+    for src in sources:
+        # (not the package itself: importing "__init__" would run it a second time)
         module = importlib.import_module(f"emfabric._kernels.{src.stem}")
         for obj in vars(module).values():
             if isinstance(obj, CPUDispatcher) and obj.targetoptions.get("parallel"):
-                parallel.append(obj.py_func.__name__)
-                assert isinstance(obj._cache, NullCache), obj.py_func.__name__
-    # (imported by step.py too)
-    assert set(parallel) == {"fused_iterate_threads", "fill_node_fields_threads"}
+                parallel.add(obj.py_func.__name__)
+                if not isinstance(obj._cache, NullCache):
+                    cached.add(obj.py_func.__name__)
+    assert parallel == {"_iterate_rows_threads", "fill_node_fields_threads",
+                        "_force_rows_threads", "loop_values_on_grid"}
+    for name in cached:
+        callers = [src.name for src, text in sources.items()
+                   if f"{name}(" in text.replace(f"def {name}(", "")]
+        assert not callers, f"the cached parallel kernel {name} is called from {callers}"
+
+
+def test_importing_the_package_touches_no_file(tmp_path):
+    """Importing emfabric._kernels (a record type, say) chooses, creates and prunes nothing;
+    the first kernel module imported does, and prunes digest folders unused for 30 days."""
+    root = tmp_path / "emfabric"
+    old = root / "kernels-0000000000000000"
+    old.mkdir(parents=True)
+    month = time.time() - 40 * 86400
+    os.utime(old, (month, month))
+    code = textwrap.dedent("""
+        import os, sys
+        import emfabric._kernels as k
+        import emfabric._kernels.records
+        root = sys.argv[1]
+        print(sorted(os.listdir(root)), k._chosen is None)
+        import emfabric._kernels.sums
+        print(sorted(os.listdir(root)), k.CACHE_DIR == k.cache_dir(), k.CACHE_PERSISTENT)
+    """)
+    out = subprocess.run([sys.executable, "-c", code, str(root)],
+                         env=_env({"NUMBA_CACHE_DIR": str(tmp_path)}), capture_output=True,
+                         text=True, check=True).stdout.splitlines()
+    assert out[0] == "['kernels-0000000000000000'] True"
+    assert out[1] == f"['kernels-{kernels.source_digest()}'] True True"
+
+
+def test_a_users_locator_setting_still_caches_the_kernels_by_digest(tmp_path):
+    """NUMBA_CACHE_LOCATOR_CLASSES makes Numba ignore its class list: the kernels' locator is
+    then put in front of the user's setting."""
+    folder, persistent = _probe({"NUMBA_CACHE_DIR": str(tmp_path),
+                                 "NUMBA_CACHE_LOCATOR_CLASSES": "UserProvidedCacheLocator"})
+    assert persistent
+    assert folder == tmp_path / "emfabric" / f"kernels-{kernels.source_digest()}"
+    assert list(folder.glob("sums.fsum-*.nbi"))
+
+
+OTHER = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, sys.argv[1])
+    if sys.argv[2] == "with":
+        import emfabric._kernels
+    import numba
+    import other
+    assert other.twice(2.0) == 4.0
+""")
+
+
+@pytest.mark.parametrize("numba_cache_dir", [True, False])
+def test_other_code_caches_where_numba_puts_it(tmp_path, numba_cache_dir):
+    """A cache=True function outside the kernels is cached where Numba alone puts it (with
+    NUMBA_CACHE_DIR in its folder, else in __pycache__ beside the source), emfabric imported
+    or not."""
+    src = tmp_path / "src"  # one source folder: Numba's cache subfolder names its path
+    src.mkdir()
+    (src / "other.py").write_text(
+        "import numba\n\n\n@numba.njit(cache=True)\ndef twice(x):\n    return 2 * x\n")
+    placed = {}
+    for run in ("without", "with"):
+        cache = tmp_path / f"cache-{run}"
+        env = {"NUMBA_CACHE_DIR": str(cache)} if numba_cache_dir else {}
+        subprocess.run([sys.executable, "-c", OTHER, str(src), run], env=_env(env),
+                       capture_output=True, text=True, check=True)
+        placed[run] = sorted(str(p.relative_to(tmp_path)).replace(f"cache-{run}", "cache")
+                             for p in tmp_path.rglob("*.nbi"))
+        shutil.rmtree(src / "__pycache__", ignore_errors=True)
+        shutil.rmtree(cache, ignore_errors=True)
+    assert placed["with"] == placed["without"]
+    assert len(placed["with"]) == 1
+    assert placed["with"][0].startswith("cache/" if numba_cache_dir else "src/__pycache__/")
+
+
+@pytest.mark.parametrize("remove", ["_CacheLocator", "get_source_stamp", "_locator_classes",
+                                    "CompileResultCacheImpl"])
+def test_missing_private_numba_names_fail_loudly(monkeypatch, remove):
+    """The private names of numba.core.caching the locator relies on are checked before use:
+    a Numba release without one raises RuntimeError naming the Numba version and the name."""
+    from numba.core import caching
+
+    if remove == "get_source_stamp":
+        monkeypatch.delattr(caching._CacheLocator, remove)
+    elif remove == "_locator_classes":
+        monkeypatch.setattr(caching.CacheImpl, remove, tuple(caching.CacheImpl._locator_classes))
+    else:
+        monkeypatch.delattr(caching, remove)
+    with pytest.raises(RuntimeError, match=f"Numba {numba.__version__}.*{remove}"):
+        kernels.check_numba_cache_hooks()
+    with pytest.raises(RuntimeError, match=remove):
+        kernels.install_kernel_locator()
+
+
+def test_installed_numba_has_the_names_and_installing_again_replaces(monkeypatch):
+    """Against the installed Numba: the check passes, the locator is first in Numba's list
+    exactly once (installing again replaces it), and Numba picks it for a kernel file only."""
+    from numba.core import caching
+
+    base, impl = kernels.check_numba_cache_hooks()
+    assert base is caching._CacheLocator
+    monkeypatch.setattr(impl, "_locator_classes", list(impl._locator_classes))
+    monkeypatch.setattr(kernels, "KernelCacheLocator", kernels.KernelCacheLocator)
+    again = kernels.install_kernel_locator()
+    assert impl._locator_classes[0] is again
+    assert sum(getattr(c, "emfabric_kernels", False) for c in impl._locator_classes) == 1
+
+    def elsewhere():
+        pass
+
+    assert not isinstance(caching.CompileResultCacheImpl(elsewhere).locator, again)

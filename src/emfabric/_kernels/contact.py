@@ -20,6 +20,7 @@ from emfabric._kernels.shapes import (
     pressing_point,
     surface_point,
 )
+from emfabric._kernels.sums import fsum
 from emfabric._kernels.vec3 import cross
 
 STICK, SLIDE = 2, 3
@@ -389,3 +390,17 @@ def candidate_errors(nx, ncand, cand, x0, xk, x1, err_rows):
         ey = x1[1, n] - x0[1, n]
         ez = x1[2, n] - x0[2, n]
         err_rows[1, row] += math.sqrt(ex * ex + ey * ey + ez * ez)
+
+
+@njit(cache=True)
+def reaction_sums(nc, c_imp, c_arm, buf, imp_force, imp_moment):
+    """Exactly rounded totals of −J and −r × J over the contacts (order-independent)."""
+    for c in range(3):
+        for k in range(nc):
+            buf[k] = -c_imp[c, k]
+        imp_force[c] = fsum(buf, nc)
+    for c in range(3):
+        a, b = (c + 1) % 3, (c + 2) % 3
+        for k in range(nc):
+            buf[k] = -(c_arm[a, k] * c_imp[b, k] - c_arm[b, k] * c_imp[a, k])
+        imp_moment[c] = fsum(buf, nc)

@@ -123,19 +123,27 @@ def step_energy(phys, sin, sout, nc, work, t0, phi, dt, out):
             delta = x1[c, n] - x0[c, n] - dt * (phi * v1[c, n] + (1.0 - phi) * v0[c, n])
             d_proj += (f1[c, n] - fm[c]) * delta
 
-    d_dam = 0.0
-    ends, rest, coef = yarns.ends, yarns.rest_length, yarns.stiffness
-    for s in range(sin.alpha.shape[0]):
-        drop = sin.alpha[s] - sout.alpha[s]
-        if drop > 0.0:
-            a = ends[s, 0]
-            b = ends[s, 1]
-            u2 = stretch_sq(x1[0, b] - x1[0, a], x1[1, b] - x1[1, a], x1[2, b] - x1[2, a],
-                            yarns.inv_rest2[s])
-            d_dam += drop * coef[s] * rest[s] * rest[s] * strain_energy_density(u2, mat)
+    d_dam = damage_release(yarns, mat, x1, sin.alpha, sout.alpha)
     out[ENERGY_WORK_FIELD] += w_field
     out[ENERGY_WORK_GRAVITY] += w_grav
     out[ENERGY_FRICTION] += d_fric
     out[ENERGY_CONTACT] += d_cont
     out[ENERGY_PROJECTION] += d_proj
     out[ENERGY_DAMAGE] += d_dam
+
+
+@njit(cache=True)
+def damage_release(yarns, mat, x, alpha_before, alpha_after):
+    """Energy released by damage [J]: each segment's α drop times its stored energy at the
+    positions x (eq. 2.6 lowers α at fixed stretch)."""
+    d_dam = 0.0
+    ends, rest, coef = yarns.ends, yarns.rest_length, yarns.stiffness
+    for s in range(alpha_before.shape[0]):
+        drop = alpha_before[s] - alpha_after[s]
+        if drop > 0.0:
+            a = ends[s, 0]
+            b = ends[s, 1]
+            u2 = stretch_sq(x[0, b] - x[0, a], x[1, b] - x[1, a], x[2, b] - x[2, a],
+                            yarns.inv_rest2[s])
+            d_dam += drop * coef[s] * rest[s] * rest[s] * strain_energy_density(u2, mat)
+    return d_dam

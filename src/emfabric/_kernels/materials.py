@@ -41,6 +41,21 @@ def stress_factor(u2, mat):
 
 
 @njit(cache=True, inline="always")
+def tangent_factor(u2, mat):
+    """The axial tangent stiffness dT/dL of a yarn at stretch² u2, over its stiffness 𝔼·A0/L0
+    (or c·A0/L0) and α: with T = stiffness·α·S/𝔼·L, dT/dL = stiffness·α·(S'·U² + S)/𝔼 where S'
+    = dS/dE. KSV: (3U² − 1)/2 above U = 1; Fung: H e^{He²/2}(1 + He²)·U² + S/c. At least the
+    value at U = 1 (1, or H for Fung): a slack yarn may be taut within the step. The largest
+    eigenvalue of the network's stiffness, and so the explicit stable step, follow from it."""
+    e = 0.5 * max(u2 - 1.0, 0.0)
+    if mat.kind == MATERIAL_FUNG:
+        h = mat.fung_h
+        g = math.exp(0.5 * h * e * e)
+        return h * g * (1.0 + h * e * e) * max(u2, 1.0) + h * e * g
+    return max(1.0, 0.5 * (3.0 * u2 - 1.0))
+
+
+@njit(cache=True, inline="always")
 def strain_energy_density(u2, mat):
     """Stored energy per unit reference volume divided by the modulus (𝔼 or c), relaxed."""
     if u2 <= 1.0:

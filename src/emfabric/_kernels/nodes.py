@@ -16,6 +16,7 @@ from numba import njit, prange
 
 from emfabric._kernels.fields import magnetic_force, node_field
 from emfabric._kernels.materials import damage_above, stress_factor, stretch_sq
+from emfabric._kernels.records import RowRecords
 
 
 @njit(cache=True)
@@ -115,18 +116,47 @@ def _tensions(xa, xb, count, inv_rest2, seg, mat, buf, out, write_alpha):
 
 
 @njit(cache=True)
-def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
-    """Rows j0 ≤ j < j1 of the fused iterate. The tensions of row j (warp) and between rows j and
-    j + 1 (fill) live in the block's row buffer and are consumed at once; a block recomputes the
-    fill tensions below its first row (writing no damage), so blocks are independent."""
+def _block_start(j0, phys, prev, sin, sout, work, buf):
+    """Prepare a block's row buffer before its first row j0: zero the padding of the warp row
+    and set the fill tensions from the row below (recomputed, writing no damage, so that blocks
+    are independent; zero for the first row). Returns (fill_up, fill_down) views."""
+    nodes, yarns, mat = phys.nodes, phys.yarns, phys.material
+    nx, ny = nodes.nx, nodes.ny
+    nw = ny * (nx - 1)
+    xx, xy, xz = prev[0], prev[1], prev[2]
+    twp = buf[ROW_WARP_TENSION:ROW_WARP_TENSION + 3]
+    tu = buf[ROW_FILL_UP:ROW_FILL_UP + 3]
+    td = buf[ROW_FILL_DOWN:ROW_FILL_DOWN + 3]
+    twp[:, 0] = 0.0
+    twp[:, nx] = 0.0
+    if j0 > 0:
+        a = (j0 - 1) * nx
+        s = nw + a
+        coef = yarns.stiffness
+        _tensions((xx[a:a + nx], xy[a:a + nx], xz[a:a + nx]),
+                  (xx[a + nx:a + 2 * nx], xy[a + nx:a + 2 * nx], xz[a + nx:a + 2 * nx]), nx,
+                  yarns.inv_rest2[yarns.inv_rest2.shape[0] - 1],
+                  (sin.alpha[s:s + nx], sout.alpha[s:s + nx], work.damage_thr[s:s + nx],
+                   coef[s:s + nx]), mat, buf, td, False)
+    else:
+        td[:] = 0.0
+    return tu, td
+
+
+@njit(cache=True)
+def _row_force(j, phys, prev, sin, sout, work, t1, buf, tu, td):
+    """The non-magnetic force of grid row j at the positions `prev` and time t1 into the row
+    buffer's ROW_FORCE rows: yarn tensions (the warp segments of row j and the fill segments to
+    row j + 1, into tu; td holds those from row j − 1), one difference per node and direction,
+    plus the electric part of eq. 2.7 and gravity. Trial damage into sout.alpha.
+
+    The one force evaluation of both schemes: the φ-update (_row_block) and central
+    differences (_force_block) call it row by row."""
     nodes, yarns, mat, fld = phys.nodes, phys.yarns, phys.material, phys.field
     node_fields = work.node_field
-    x0, v0, f0, alpha_c = sin.x, sin.v, sin.f, sin.alpha
-    x1, v1, f1, alpha_t = sout.x, sout.v, sout.f, sout.alpha
-    damage_thr, skip_err = work.damage_thr, work.flag
-    err_num, err_den = work.err_num, work.err_den
+    alpha_c, alpha_t, damage_thr = sin.alpha, sout.alpha, work.damage_thr
     nx, ny = nodes.nx, nodes.ny
-    mass, inv_mass, charge = nodes.mass, nodes.inv_mass, nodes.charge
+    mass, charge = nodes.mass, nodes.charge
     coef = yarns.stiffness
     grav = fld.gravity
     nw = ny * (nx - 1)
@@ -136,19 +166,57 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
     xx, xy, xz = prev[0], prev[1], prev[2]
     # padded warp row: twp[:, i + 1] is the tension of segment (i, i + 1), zeros at both ends
     twp = buf[ROW_WARP_TENSION:ROW_WARP_TENSION + 3]
-    tu = buf[ROW_FILL_UP:ROW_FILL_UP + 3]
-    td = buf[ROW_FILL_DOWN:ROW_FILL_DOWN + 3]
-    twp[:, 0] = 0.0
-    twp[:, nx] = 0.0
-    if j0 > 0:
-        a = (j0 - 1) * nx
-        s = nw + a
-        _tensions((xx[a:a + nx], xy[a:a + nx], xz[a:a + nx]),
-                  (xx[a + nx:a + 2 * nx], xy[a + nx:a + 2 * nx], xz[a + nx:a + 2 * nx]), nx,
-                  inv_rest2_fill, (alpha_c[s:s + nx], alpha_t[s:s + nx],
-                                   damage_thr[s:s + nx], coef[s:s + nx]), mat, buf, td, False)
+    f = buf[ROW_FORCE:ROW_FORCE + 3]
+    nb = j * nx
+    sb = j * (nx - 1)
+    e = nb + nx
+    _tensions((xx[nb:e - 1], xy[nb:e - 1], xz[nb:e - 1]), (xx[nb + 1:e], xy[nb + 1:e],
+              xz[nb + 1:e]), nx - 1, inv_rest2_warp,
+              (alpha_c[sb:sb + nx - 1], alpha_t[sb:sb + nx - 1],
+               damage_thr[sb:sb + nx - 1], coef[sb:sb + nx - 1]), mat, buf, twp[:, 1:],
+              True)
+    if j < ny - 1:
+        _tensions((xx[nb:e], xy[nb:e], xz[nb:e]), (xx[e:e + nx], xy[e:e + nx],
+                  xz[e:e + nx]), nx, inv_rest2_fill,
+                  (alpha_c[nw + nb:nw + e], alpha_t[nw + nb:nw + e],
+                   damage_thr[nw + nb:nw + e], coef[nw + nb:nw + e]), mat, buf, tu, True)
     else:
-        td[:] = 0.0
+        tu[:, :nx] = 0.0
+    m = mass[nb:e]
+    q = charge[nb:e]
+    # the field at t1 where the node is now (the iterate). The uniform and half-space
+    # fields: field_at in each loop that needs it (a compare and a select, cheaper than a
+    # row of stores and loads: the stored variant made an evaluation ~7 % slower); a field
+    # with sources: the value fields.fill_node_fields stored for this attempt (at the
+    # predicted position). fields.node_field, chosen at compile time by the field's type
+    px, py, pz = xx[nb:e], xy[nb:e], xz[nb:e]
+    for c in range(3):
+        fc = f[c]
+        tw = twp[c]
+        tuc = tu[c]
+        tdc = td[c]
+        g = grav[c]
+        # yarn force, one difference per node and direction (mirror-exact assembly),
+        # then the electric part of eq. 2.7 and gravity
+        for i in range(nx):
+            fe, _fb = node_field(fld, node_fields, nb + i, (px[i], py[i], pz[i]), t1)
+            fc[i] = ((tw[i + 1] - tw[i]) + (tuc[i] - tdc[i])) + (m[i] * g + q[i] * fe[c])
+
+
+@njit(cache=True)
+def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
+    """Rows j0 ≤ j < j1 of the fused φ iterate: the force of each row (_row_force), consumed at
+    once by the φ-update of its nodes (eqs. 3.2, A12–A13) and the error terms of eq. 3.10."""
+    nodes, fld = phys.nodes, phys.field
+    node_fields = work.node_field
+    x0, v0, f0 = sin.x, sin.v, sin.f
+    x1, v1, f1 = sout.x, sout.v, sout.f
+    skip_err = work.flag
+    err_num, err_den = work.err_num, work.err_den
+    nx = nodes.nx
+    inv_mass, charge = nodes.inv_mass, nodes.charge
+    xx, xy, xz = prev[0], prev[1], prev[2]
+    tu, td = _block_start(j0, phys, prev, sin, sout, work, buf)
     f = buf[ROW_FORCE:ROW_FORCE + 3]
     acc = buf[ROW_VEL_EXPLICIT:ROW_VEL_EXPLICIT + 3]
     uu = buf[ROW_ROTATION:ROW_ROTATION + 3]
@@ -156,43 +224,16 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
     inv = buf[ROW_INV_DENOM]
     dt_over_m = buf[ROW_DT_OVER_MASS]
     for j in range(j0, j1):
+        _row_force(j, phys, prev, sin, sout, work, t1, buf, tu, td)
         nb = j * nx
-        sb = j * (nx - 1)
         e = nb + nx
-        _tensions((xx[nb:e - 1], xy[nb:e - 1], xz[nb:e - 1]), (xx[nb + 1:e], xy[nb + 1:e],
-                  xz[nb + 1:e]), nx - 1, inv_rest2_warp,
-                  (alpha_c[sb:sb + nx - 1], alpha_t[sb:sb + nx - 1],
-                   damage_thr[sb:sb + nx - 1], coef[sb:sb + nx - 1]), mat, buf, twp[:, 1:],
-                  True)
-        if j < ny - 1:
-            _tensions((xx[nb:e], xy[nb:e], xz[nb:e]), (xx[e:e + nx], xy[e:e + nx],
-                      xz[e:e + nx]), nx, inv_rest2_fill,
-                      (alpha_c[nw + nb:nw + e], alpha_t[nw + nb:nw + e],
-                       damage_thr[nw + nb:nw + e], coef[nw + nb:nw + e]), mat, buf, tu, True)
-        else:
-            tu[:, :nx] = 0.0
-        m = mass[nb:e]
         im = inv_mass[nb:e]
         q = charge[nb:e]
-        # the field at t + Δt where the node is now (the iterate). The uniform and half-space
-        # fields: field_at in each loop that needs it (a compare and a select, cheaper than a
-        # row of stores and loads: the stored variant made an evaluation ~7 % slower); a field
-        # with sources: the value fields.fill_node_fields stored for this attempt (at the
-        # predicted position). fields.node_field, chosen at compile time by the field's type
         px, py, pz = xx[nb:e], xy[nb:e], xz[nb:e]
         for i in range(nx):
             dt_over_m[i] = dt * im[i]
         for c in range(3):
             fc = f[c]
-            tw = twp[c]
-            tuc = tu[c]
-            tdc = td[c]
-            g = grav[c]
-            # yarn force, one difference per node and direction (mirror-exact assembly),
-            # then the electric part of eq. 2.7 and gravity
-            for i in range(nx):
-                fe, _fb = node_field(fld, node_fields, nb + i, (px[i], py[i], pz[i]), t1)
-                fc[i] = ((tw[i + 1] - tw[i]) + (tuc[i] - tdc[i])) + (m[i] * g + q[i] * fe[c])
             ac = acc[c]
             v0c = v0[c, nb:e]
             f0c = f0[c, nb:e]
@@ -250,7 +291,26 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
         tu, td = td, tu
 
 
+@njit(cache=True)
+def _force_block(j0, j1, phys, x, sin, sout, work, t, buf):
+    """Rows j0 ≤ j < j1 of node_forces: each row's force (_row_force) into sout.f."""
+    nx = phys.nodes.nx
+    f1 = sout.f
+    tu, td = _block_start(j0, phys, x, sin, sout, work, buf)
+    f = buf[ROW_FORCE:ROW_FORCE + 3]
+    for j in range(j0, j1):
+        _row_force(j, phys, x, sin, sout, work, t, buf, tu, td)
+        nb = j * nx
+        for c in range(3):
+            fc = f[c]
+            oc = f1[c, nb:nb + nx]
+            for i in range(nx):
+                oc[i] = fc[i]
+        tu, td = td, tu
+
+
 ROWS_PER_BLOCK = 16
+
 
 
 @njit(cache=True)
@@ -263,36 +323,76 @@ def fused_iterate(phys, prev, sin, sout, work, t1, phi, dt, rowbuf):
     nx + 1). Walks the same row blocks as the threaded kernel, one after the other: the same
     arithmetic, and one compiled specialisation of _row_block for both.
     """
-    nodes = phys.nodes
-    ny = nodes.ny
+    rec = RowRecords(phys.nodes, phys.yarns, phys.material, phys.field)
+    ny = phys.nodes.ny
     blocks = (ny + ROWS_PER_BLOCK - 1) // ROWS_PER_BLOCK
     for b in range(blocks):
         j0 = b * ROWS_PER_BLOCK
         j1 = min(ny, j0 + ROWS_PER_BLOCK)
-        _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, rowbuf)
-    _row_sums(work.err_num, work.err_den, nodes.nx, ny, work.err_rows)
+        _row_block(j0, j1, rec, prev, sin, sout, work, t1, phi, dt, rowbuf)
+    _row_sums(work.err_num, work.err_den, phys.nodes.nx, ny, work.err_rows)
 
 
-@njit(parallel=True)  # never cached on its own: see the docstring
+@njit  # never cached on its own: see fused_iterate_threads' docstring
 def fused_iterate_threads(phys, prev, sin, sout, work, t1, phi, dt, rowbuf):
     """fused_iterate over blocks of ROWS_PER_BLOCK rows in parallel threads; rowbuf (blocks,
     ROWBUF_ROWS, nx + 1). Every value is computed by the same arithmetic as in the serial
     kernel, so results do not depend on the number of threads.
 
-    The records are arguments of this function, not taken apart here: Numba's parallel loops
-    accept a named tuple only as a function argument.
+    The parallel loop (_iterate_rows_threads) takes the flat records as arguments: Numba's
+    parallel loops accept a named tuple only as a function argument, and not a nested one.
 
     Not cached by itself, only inside its cached callers (the threaded step kernel): a cached
-    caller compiled against this kernel loaded from the cache crashed when it was in turn
+    caller compiled against a parallel kernel loaded from the cache crashed when it was in turn
     loaded from the cache (reproduced: `bench.py` (a) caching it first, then a run compiling the
     threaded step kernel, then any later run; Numba issues #8578 and #10128 describe the same
     mismatch of a parallel callee's native names between processes). Compiled afresh with its
     caller, it is linked into the caller's cached code."""
-    nodes = phys.nodes
+    _iterate_rows_threads(phys.nodes, phys.yarns, phys.material, phys.field, prev, sin, sout,
+                          work, t1, phi, dt, rowbuf)
+    _row_sums(work.err_num, work.err_den, phys.nodes.nx, phys.nodes.ny, work.err_rows)
+
+
+@njit(parallel=True)  # never cached on its own, as fused_iterate_threads
+def _iterate_rows_threads(nodes, yarns, mat, fld, prev, sin, sout, work, t1, phi, dt, rowbuf):
+    """The row blocks of fused_iterate_threads, in parallel."""
     ny = nodes.ny
     blocks = (ny + ROWS_PER_BLOCK - 1) // ROWS_PER_BLOCK
     for b in prange(blocks):
         j0 = b * ROWS_PER_BLOCK
         j1 = min(ny, j0 + ROWS_PER_BLOCK)
-        _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, rowbuf[b])
-    _row_sums(work.err_num, work.err_den, nodes.nx, ny, work.err_rows)
+        _row_block(j0, j1, RowRecords(nodes, yarns, mat, fld), prev, sin, sout, work, t1, phi,
+                   dt, rowbuf[b])
+
+
+@njit(cache=True)
+def node_forces(phys, x, sin, sout, work, t, rowbuf):
+    """The non-magnetic force on every node at the positions x and time t into sout.f (yarn
+    tensions with trial damage from the committed sin.alpha into sout.alpha, electric force,
+    gravity), serially: the force evaluation of central differences. rowbuf (ROWBUF_ROWS,
+    nx + 1); the field of sources from work.node_field (fields.fill_node_fields at x)."""
+    rec = RowRecords(phys.nodes, phys.yarns, phys.material, phys.field)
+    ny = phys.nodes.ny
+    blocks = (ny + ROWS_PER_BLOCK - 1) // ROWS_PER_BLOCK
+    for b in range(blocks):
+        j0 = b * ROWS_PER_BLOCK
+        _force_block(j0, min(ny, j0 + ROWS_PER_BLOCK), rec, x, sin, sout, work, t, rowbuf)
+
+
+@njit  # never cached on its own, as fused_iterate_threads
+def node_forces_threads(phys, x, sin, sout, work, t, rowbuf):
+    """node_forces over blocks of ROWS_PER_BLOCK rows in parallel threads (rowbuf (blocks,
+    ROWBUF_ROWS, nx + 1)); the same arithmetic as the serial kernel."""
+    _force_rows_threads(phys.nodes, phys.yarns, phys.material, phys.field, x, sin, sout, work,
+                        t, rowbuf)
+
+
+@njit(parallel=True)  # never cached on its own, as fused_iterate_threads
+def _force_rows_threads(nodes, yarns, mat, fld, x, sin, sout, work, t, rowbuf):
+    """The row blocks of node_forces_threads, in parallel."""
+    ny = nodes.ny
+    blocks = (ny + ROWS_PER_BLOCK - 1) // ROWS_PER_BLOCK
+    for b in prange(blocks):
+        j0 = b * ROWS_PER_BLOCK
+        _force_block(j0, min(ny, j0 + ROWS_PER_BLOCK), RowRecords(nodes, yarns, mat, fld), x,
+                     sin, sout, work, t, rowbuf[b])

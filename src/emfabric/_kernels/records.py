@@ -280,6 +280,17 @@ class StepStats(NamedTuple):
     """Contacts after the step."""
 
 
+class RowRecords(NamedTuple):
+    """What the row kernels of emfabric._kernels.nodes read (Physics's first four records):
+    built inside compiled code, one type for the serial and the threaded kernels (a parallel
+    loop cannot take the nested Physics record as an argument)."""
+
+    nodes: Nodes
+    yarns: Yarns
+    material: Material
+    field: Field
+
+
 class Physics(NamedTuple):
     """Everything a kernel reads about the model, by name."""
 
@@ -306,6 +317,10 @@ class StateArrays(NamedTuple):
     """Body state, (BODY_ROWS, 3)."""
     e: np.ndarray = np.zeros((3, 0))
     """The electric field in each node's force f [V/m], (3, node_count)."""
+    contact: np.ndarray = np.zeros((4, 0))
+    """Each node's contact at the state's time (central differences), (4, node_count): rows
+    0–2 the body-frame point it sticks to [m], row 3 its mode (0 none, contact.STICK,
+    contact.SLIDE)."""
 
 
 class Work(NamedTuple):

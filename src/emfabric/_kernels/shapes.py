@@ -170,6 +170,13 @@ def bounding_radius(body):
 
 
 @njit(cache=True, inline="always")
+def thinnest_radius(body):
+    """The body's smallest radius [m]: the sphere's, or the calibre's half of the other shapes
+    (a contact cannot be resolved if the body moves by a sizeable part of it in one step)."""
+    return body.radius
+
+
+@njit(cache=True, inline="always")
 def pressing_point(body, rot, m, h):
     """Where a yarn segment x(τ) = c + m + τ·h, τ ∈ [−1, 1] (m: its midpoint relative to the
     centre of mass c, h: half the vector from its first to its second end) presses against the

@@ -18,6 +18,7 @@ from emfabric._kernels.contact import (
     find_candidates,
     find_segment_candidates,
     node_contact,
+    reaction_sums,
     segment_contact,
 )
 from emfabric._kernels.fields import (
@@ -30,27 +31,12 @@ from emfabric._kernels.materials import damage_thresholds
 from emfabric._kernels.nodes import fused_iterate, fused_iterate_threads
 from emfabric._kernels.records import BODY_V, BODY_W, BODY_X, StateArrays
 from emfabric._kernels.shapes import bounding_radius, nodes_inside
-from emfabric._kernels.sums import fsum
 from emfabric._kernels.vec3 import copy_into, norm
 
 CONVERGED, NOT_CONVERGED, NOT_FINITE, CONTACT_MISSED, BODY_NOT_CONVERGED = 0, 1, 2, 3, 4
 """Status of an attempted step: accepted; ϖ above tolerance after the iteration limit; a
 non-finite value; a free node found inside the body that was no contact candidate; the body's
 rotation (eq. B16) not converged within body.BODY_ITERATION_LIMIT at the last iterate."""
-
-
-@njit(cache=True)
-def _reaction_sums(nc, c_imp, c_arm, buf, imp_force, imp_moment):
-    """Exactly rounded totals of −J and −r × J over the contacts (order-independent)."""
-    for c in range(3):
-        for k in range(nc):
-            buf[k] = -c_imp[c, k]
-        imp_force[c] = fsum(buf, nc)
-    for c in range(3):
-        a, b = (c + 1) % 3, (c + 2) % 3
-        for k in range(nc):
-            buf[k] = -(c_arm[a, k] * c_imp[b, k] - c_arm[b, k] * c_imp[a, k])
-        imp_moment[c] = fsum(buf, nc)
 
 
 @njit(cache=True)
@@ -166,7 +152,8 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
         else:
             prev = xbuf if k % 2 == 1 else x1
             cur = x1 if k % 2 == 1 else xbuf
-        fabric_iterate(phys, prev, sin, StateArrays(cur, v1, f1, alpha_t, b_out, sout.e), work,
+        fabric_iterate(phys, prev, sin, StateArrays(cur, v1, f1, alpha_t, b_out, sout.e,
+                                                    sout.contact), work,
                        rowbuf, threads, t1, phi, dt)
         num_b = 0.0
         den_b = 0.0
@@ -177,7 +164,7 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
                 nc = segment_contact(nodes, phys.yarns, body, phys.contact, b_out, nseg, nc,
                                      cur, v1, work)
             candidate_errors(nodes.nx, ncand, work.cand, x0, prev, cur, err_rows)
-            _reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, imp_force, imp_moment)
+            reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, imp_force, imp_moment)
             num_b, den_b, body_ok = body_update(body, phys.field, b_in, b_out, t1, phi, dt,
                                                 work.reaction, work.body_scratch, tol)
         # error measure, eq. 3.10 step 5a (fabric), and the same for the body

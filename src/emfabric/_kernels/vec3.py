@@ -50,6 +50,12 @@ def mat_t_vec(m, v):
             m[0, 2] * v[0] + m[1, 2] * v[1] + m[2, 2] * v[2])
 
 
+@njit(cache=True, inline="always")
+def to_body_frame(rot, d):
+    """Rᵀ·d: a world-frame vector d in the body frame of rotation R."""
+    return mat_t_vec(rot, d)
+
+
 @njit(cache=True)
 def mat_mul(a, b, out):
     """out = a · b for 3 × 3 arrays (out must not alias a or b)."""

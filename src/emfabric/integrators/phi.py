@@ -24,7 +24,7 @@ from emfabric._kernels.step import (
     NOT_FINITE,
     attempt_step,
 )
-from emfabric.integrators.base import DivergenceError, StepInfo
+from emfabric.integrators.base import DivergenceError, IntegratorBase, StepInfo
 from emfabric.sim.fastcall import Direct
 from emfabric.sim.model import Model
 from emfabric.sim.state import State
@@ -41,14 +41,15 @@ THREADS_FROM_NODES = 32 * 32
 """Sheets with at least this many nodes use the two-thread kernel."""
 
 
-class Integrator:
-    """Holds the workspace of the step kernel for one Model."""
+class Integrator(IntegratorBase):
+    """The φ-scheme: holds the workspace of the step kernel for one Model."""
+
+    name = "phi"
 
     def __init__(self, model: Model, *, threads: bool | None = None):
         """threads: use the row-block threaded kernel (default: for sheets of at least
         THREADS_FROM_NODES nodes when Numba has more than one thread)."""
-        self.model = model
-        self.physics = model.physics
+        super().__init__(model)
         n = model.node_count
         # threads pay off on large sheets only; block size fixed, so results never depend on them
         self._use_threads(threads if threads is not None else (
@@ -166,7 +167,7 @@ class Integrator:
             if status == CONVERGED:
                 break
             if not self.adaptive:
-                self._fail(s_in, dt, f"no convergence in {k} iterations at fixed Δt "
+                self.fail(s_in, dt, f"no convergence in {k} iterations at fixed Δt "
                            f"(ϖ = {err:.3g} > tolerance {tol:g}); lower solver.dt_max")
             if status == NOT_CONVERGED:
                 factor = self.safety * step_factor(err, k, tol, k_d, self.p)
@@ -183,7 +184,7 @@ class Integrator:
                         BODY_NOT_CONVERGED: "the projectile's rotation (eq. B16) did not "
                                             "converge in the body update"}.get(
                     status, f"ϖ = {err:.3g} after {k} iterations")
-                self._fail(s_in, dt, f"step cannot converge even at Δt < dt_min = "
+                self.fail(s_in, dt, f"step cannot converge even at Δt < dt_min = "
                            f"{self.dt_min:g} s ({what})")
         # accept: time advances by the step just taken
         s_out.t = s_in.t + dt
@@ -207,18 +208,6 @@ class Integrator:
         s_out.contact_force[:] = self.work.reaction[0] / dt
         return StepInfo(t=s_out.t, dt=dt, iterations=k, error=err, rejected=rejected,
                         evaluations=evaluations, contacts=nc)
-
-    def _fail(self, s_in: State, dt: float, why: str) -> None:
-        f = np.linalg.norm(s_in.node_f, axis=0)
-        node = int(np.argmax(f)) if f.size else -1
-        fmax = float(f[node]) if f.size else 0.0
-        i, j = node % self.model.nx, node // self.model.nx
-        raise DivergenceError(
-            f"diverged at t = {s_in.t:.6g} s, Δt = {dt:.3g} s: {why}; largest force "
-            f"{fmax:.3g} N on node {node} (grid i={i}, j={j}) at "
-            f"{tuple(round(float(c), 6) for c in s_in.node_x[:, node])} m",
-            s_in.t, dt, node, fmax,
-        )
 
 
 __all__ = ["DivergenceError", "Integrator", "StepInfo", "step_factor"]

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import xarray as xr
 
-from emfabric._kernels import CACHE_DIR, CACHE_PERSISTENT, is_compiled, mark_compiled
+from emfabric._kernels import cache_dir, cache_persistent, is_compiled, mark_compiled
 from emfabric.config.scenario import Scenario
-from emfabric.integrators import DivergenceError, Integrator, StepInfo
+from emfabric.integrators import DivergenceError, StepInfo, make_integrator
 from emfabric.io.checkpoint import (
     CHECKPOINT,
     CheckpointError,
@@ -123,13 +123,13 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
           progress: ProgressFn | None, end_time: float | None) -> RunResult:
     wall0 = time.perf_counter()
     options = model.options
-    integ = Integrator(model)
+    integ = make_integrator(model)
     # on a cold kernel cache, run serially and compile the threaded kernel beside the run
     deferred = integ.defer_threads()
     if not is_compiled(integ.variant()):
         log.info("compiling kernels (first run only, about half a minute; cached in %s)" if
-                 CACHE_PERSISTENT else "compiling kernels (no writable cache folder: "
-                 "every run compiles; cached in %s for this process)", CACHE_DIR)
+                 cache_persistent() else "compiling kernels (no writable cache folder: "
+                 "every run compiles; cached in %s for this process)", cache_dir())
     t_end = end_time if end_time is not None else options.end_time
     interval = options.snapshot_interval
     if resumed is None:

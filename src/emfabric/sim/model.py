@@ -62,6 +62,10 @@ class Options:
     """[s]"""
     checkpoint_seconds: float = 5.0
     """Wall time between checkpoints [s]."""
+    integrator: str = "phi"
+    """"phi" or "central-difference"."""
+    courant: float = 0.5
+    """central-difference: fraction of the stable step taken."""
 
     @classmethod
     def of(cls, scenario: Scenario) -> Options:
@@ -71,7 +75,8 @@ class Options:
                    int(s.max_iterations), bool(s.adaptive), float(s.exponent), float(s.safety),
                    float(s.dt_max), float(s.dt_min), float(s.dt_initial or s.dt_max), s.scheme,
                    int(s.anderson_depth), s.predictor, float(s.end_time),
-                   float(o.snapshot_interval), float(o.checkpoint_seconds))
+                   float(o.snapshot_interval), float(o.checkpoint_seconds), s.integrator,
+                   float(s.courant))
 
 
 @dataclass(frozen=True, eq=False)

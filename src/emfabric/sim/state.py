@@ -50,6 +50,11 @@ class State:
     body: np.ndarray
     """Rigid body, shape (BODY_ROWS, 3): the rows of emfabric._kernels.records (x [m], v [m/s],
     ω [rad/s], F [N], M [N m] (non-impulsive force and moment at t), rotation matrix)."""
+    node_contact: np.ndarray
+    """Each node's contact at t (central differences; zeros for the φ-scheme), (4,
+    node_count): rows 0–2 the body-frame point it sticks to [m], row 3 its mode (0 none,
+    contact.STICK, contact.SLIDE): a node that sticks is put where that material point has
+    moved to in the next step."""
     steps: int = 0
     """Accepted steps so far."""
     rejected: int = 0
@@ -77,7 +82,7 @@ class State:
     def arrays(self) -> StateArrays:
         """The arrays a step kernel reads or writes, as a named record."""
         return StateArrays(self.node_x, self.node_v, self.node_f, self.seg_alpha, self.body,
-                           self.node_e)
+                           self.node_e, self.node_contact)
 
     @property
     def body_x(self) -> np.ndarray:
@@ -114,6 +119,7 @@ def initial_state(model: Model) -> State:
         node_e=np.zeros((3, n)),
         seg_alpha=np.ones(s),
         body=np.zeros((BODY_ROWS, 3)),
+        node_contact=np.zeros((4, n)),
     )
     st.body[BODY_X] = m.body_x0
     st.body[BODY_V] = m.body_v0

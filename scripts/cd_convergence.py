@@ -1,0 +1,50 @@
+"""Central differences against a converged φ run: the largest error of ω_x over the run (as a
+fraction of its peak) and the energy balance error, per courant number.
+
+    python scripts/cd_convergence.py [SCENARIO] [--end-time T] [--courant C ...]
+
+Default: demo-small (30 × 30) to 50 µs, courant 0.5 0.25 0.125 0.0625 0.03125, the reference a
+φ run at dt_max = 1e-8 s and tolerance 1e-9 (docs/theory.md §4.1 quotes its output). Several
+minutes on two cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+import emfabric
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("scenario", nargs="?", default="demo-small")
+    p.add_argument("--end-time", type=float, default=50e-6)
+    p.add_argument("--courant", type=float, nargs="+",
+                   default=[0.5, 0.25, 0.125, 0.0625, 0.03125])
+    args = p.parse_args()
+    base = {"solver.end_time": args.end_time}
+    ref = emfabric.run(emfabric.load_scenario(args.scenario, {
+        **base, "solver.dt_max": 1e-8, "solver.tolerance": 1e-9})).history
+    t_ref = ref.time.values
+    w_ref = ref.angular_velocity.values[:, 0]
+    peak = float(np.abs(w_ref).max())
+    print(f"{args.scenario} to {args.end_time:g} s; reference φ run: {ref.sizes['time'] - 1} "
+          f"steps, peak |ω_x| = {peak:.4g} rad/s")
+    runs = [("phi (defaults)", {})] + [
+        (f"central-difference {c:g}", {"solver.integrator": "central-difference",
+                                       "solver.courant": c}) for c in args.courant]
+    print(f"{'scheme':28s}{'steps':>8s}{'evals':>8s}{'max err/peak':>14s}"
+          f"{'end err/peak':>14s}{'balance [J]':>13s}")
+    for name, over in runs:
+        res = emfabric.run(emfabric.load_scenario(args.scenario, {**base, **over}))
+        ds = res.history
+        w = np.interp(t_ref, ds.time.values, ds.angular_velocity.values[:, 0])
+        print(f"{name:28s}{res.summary['steps']:8d}{res.summary['force_evaluations']:8d}"
+              f"{np.abs(w - w_ref).max() / peak:14.4f}{abs(w[-1] - w_ref[-1]) / peak:14.4f}"
+              f"{float(ds.energy_balance_error[-1]):13.4g}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,532 @@
+"""Central differences: one explicit step, one force evaluation (kick, rotate, drift, contact,
+force, rotate, kick).
+
+With h = Δt, f the non-magnetic node force (yarns + electric + gravity, nodes.node_forces) and
+the magnetic force time-centred as two exact rotations of half a step each (Boris's two-step
+rotation with the angle |q B/m|·h/2 exactly: the cyclotron frequency is exact and |v| is kept):
+
+    v⁻ = v_n + h/(2m) f_n,   v_{n+½} = R(B(x_n, t_n), h/2) v⁻,   x_{n+1} = x_n + h v_{n+½},
+    contact and friction impulses on v_{n+½} at x_{n+1} (the reaction on the body),
+    f_{n+1} = f(x_{n+1}, t_{n+1}),   v⁺ = R(B(x_{n+1}, t_{n+1}), h/2) v_{n+½},
+    v_{n+1} = v⁺ + h/(2m) f_{n+1}.
+
+The body the same way: V and the angular momentum H = Ī ω get half kicks from the field's force
+and moment (body.field_wrench), the rotation R_{n+1} = exp(h ω_{n+½}) R_n with ω_{n+½} =
+Ī(R_{n+¼})⁻¹ H_{n+½} at the mid-rotation (a small fixed point, as eq. B16), and the contact
+reaction −J at the contact points between the drift and the second half kick.
+
+Contact: a candidate node inside the body after the drift is given the impulse of the contact
+law (contact.contact_impulse: stick to the surface point's velocity, else Coulomb slip). A node
+that sticks is put on the surface and remembers the body-frame material point it sticks to
+(StateArrays.contact); a node that stuck in the previous step is put where that material point
+has moved to — not projected radially, which lags the surface by the tangential drift of the
+step. Segments (contact.segment_contact) as in the φ-scheme.
+
+Energy: the kicks and the impulses change the kinetic energy by exactly the work booked (field
+and gravity work as h/2 f·v̄ of each kick, contact and friction as J·(v̄_node − v̄_point)); the
+yarns' work is the trapezoid h/2 (f_n + f_{n+1})·v_{n+½} of their energy change, so the balance
+error measures the scheme's own error, O(h²) per unit time.
+"""
+
+import math
+
+from numba import njit
+
+from emfabric._kernels.body import BODY_ITERATION_LIMIT, field_wrench
+from emfabric._kernels.contact import (
+    SLIDE,
+    STICK,
+    contact_impulse,
+    find_candidates,
+    find_segment_candidates,
+    reaction_sums,
+    segment_contact,
+)
+from emfabric._kernels.energy import damage_release
+from emfabric._kernels.fields import (
+    electric_at_nodes,
+    field_at,
+    fill_node_fields,
+    has_electric_field,
+    magnetic_force,
+    node_field,
+    with_sources,
+)
+from emfabric._kernels.materials import damage_thresholds, stretch_sq, tangent_factor
+from emfabric._kernels.nodes import node_forces, node_forces_threads
+from emfabric._kernels.records import (
+    BODY_F,
+    BODY_M,
+    BODY_R0,
+    BODY_V,
+    BODY_W,
+    BODY_X,
+    ENERGY_CONTACT,
+    ENERGY_DAMAGE,
+    ENERGY_FRICTION,
+    ENERGY_PROJECTION,
+    ENERGY_WORK_FIELD,
+    ENERGY_WORK_GRAVITY,
+)
+from emfabric._kernels.shapes import (
+    bounding_radius,
+    contact_margin,
+    nodes_inside,
+    surface_point,
+    thinnest_radius,
+)
+from emfabric._kernels.vec3 import (
+    copy_into,
+    cross,
+    dot,
+    mat_mul,
+    mat_vec,
+    norm,
+    rotation_increment,
+    to_body_frame,
+    vec,
+    world_inertia_solve,
+    world_inertia_times,
+)
+
+OK, NOT_FINITE, CONTACT_MISSED, BODY_NOT_CONVERGED = 0, 2, 3, 4
+"""Status of a step (the φ kernel's codes where they mean the same)."""
+
+CONTACT_TRAVEL = 0.25
+"""The largest fraction of the body's radius it may move relative to the fabric in one step:
+the no-tunnelling limit of the step (a thin, fast body cannot pass a yarn between two steps)."""
+
+
+@njit(cache=True, inline="always")
+def rotate(v, q_over_m, b, h):
+    """v after a time h of dv/dt = (q/m) v × B at constant B: the rotation about Ω = −(q/m) B by
+    the angle |Ω| h (Rodrigues). The same map as Boris's two-step rotation with t = tan(θ/2)
+    along Ω̂ — the standard t = qBh/(2m) turns by 2 atan(|t|) < θ; this one is exact at any
+    angle, and keeps |v|."""
+    bb = math.sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2])
+    theta = abs(q_over_m) * bb * h
+    if theta == 0.0:
+        return v
+    s = -1.0 / bb if q_over_m > 0.0 else 1.0 / bb
+    kx, ky, kz = s * b[0], s * b[1], s * b[2]
+    cs = math.cos(theta)
+    sn = math.sin(theta)
+    kv = (kx * v[0] + ky * v[1] + kz * v[2]) * (1.0 - cs)
+    return (v[0] * cs + (ky * v[2] - kz * v[1]) * sn + kx * kv,
+            v[1] * cs + (kz * v[0] - kx * v[2]) * sn + ky * kv,
+            v[2] * cs + (kx * v[1] - ky * v[0]) * sn + kz * kv)
+
+
+@njit(cache=True)
+def stable_step(phys, x, alpha, scratch):
+    """The explicit stability limit 2/ω_max of the fabric at the positions x and damage α [s]:
+    ω_max² ≤ max over free nodes of 2 Σ k_t/m (Gershgorin), k_t the axial tangent stiffness of
+    each segment at its stretch (materials.tangent_factor); scratch (node_count,). inf for a
+    fabric without free nodes."""
+    nodes, yarns, mat = phys.nodes, phys.yarns, phys.material
+    ends, coef, il2 = yarns.ends, yarns.stiffness, yarns.inv_rest2
+    for n in range(scratch.shape[0]):
+        scratch[n] = 0.0
+    for s in range(ends.shape[0]):
+        a = ends[s, 0]
+        b = ends[s, 1]
+        u2 = stretch_sq(x[0, b] - x[0, a], x[1, b] - x[1, a], x[2, b] - x[2, a], il2[s])
+        k = coef[s] * alpha[s] * tangent_factor(u2, mat)
+        scratch[a] += k
+        scratch[b] += k
+    worst = 0.0
+    for n in range(scratch.shape[0]):
+        if nodes.inv_mass[n] > 0.0:
+            worst = max(worst, 2.0 * scratch[n] * nodes.inv_mass[n])
+    return 2.0 / math.sqrt(worst) if worst > 0.0 else math.inf
+
+
+@njit(cache=True)
+def travel_step(phys, x, v, b_state):
+    """The no-tunnelling limit [s]: the body moves at most CONTACT_TRAVEL of its radius relative
+    to any node in one step (inf without a body or motion)."""
+    body = phys.body
+    if not body.active:
+        return math.inf
+    vmax = 0.0
+    for n in range(x.shape[1]):
+        vmax = max(vmax, v[0, n] ** 2 + v[1, n] ** 2 + v[2, n] ** 2)
+    speed = (norm(b_state[BODY_V]) + bounding_radius(body) * norm(b_state[BODY_W])
+             + math.sqrt(vmax))
+    return CONTACT_TRAVEL * thinnest_radius(body) / speed if speed > 0.0 else math.inf
+
+
+@njit(cache=True, inline="always")
+def _spin_solve(rot, body, h_vec, scratch):
+    """ω = Ī(R)⁻¹ H for the body at rotation R."""
+    return world_inertia_solve(rot, body.inertia, h_vec, scratch[3:7])
+
+
+@njit(cache=True)
+def _mid_rotation(body, rot0, h_half, dt, tol, scratch, rot1):
+    """ω_{n+½} = Ī(exp(Δt/2 ω) R_n)⁻¹ H_{n+½} by fixed-point iteration from the Ī(R_n)⁻¹ H
+    guess, then R_{n+1} = exp(Δt ω) R_n into rot1. Returns (ω, converged)."""
+    inc = scratch[0:3]
+    w = _spin_solve(rot0, body, h_half, scratch)
+    for _ in range(BODY_ITERATION_LIMIT):
+        rotation_increment((0.5 * dt * w[0], 0.5 * dt * w[1], 0.5 * dt * w[2]), inc)
+        mat_mul(inc, rot0, rot1)
+        w_new = _spin_solve(rot1, body, h_half, scratch)
+        change = norm((w_new[0] - w[0], w_new[1] - w[1], w_new[2] - w[2]))
+        w = w_new
+        if change <= tol * norm(w):
+            rotation_increment((dt * w[0], dt * w[1], dt * w[2]), inc)
+            mat_mul(inc, rot0, rot1)
+            return w, True
+    rotation_increment((dt * w[0], dt * w[1], dt * w[2]), inc)
+    mat_mul(inc, rot0, rot1)
+    return w, False
+
+
+@njit(cache=True)
+def _kick_rotate_drift(phys, sin, sout, work, t0, dt):
+    """First half of every free node: v⁻ = v + h/(2m) f, v_{n+½} = R(B(x, t0), h/2) v⁻ into
+    sout.v, x_{n+1} = x + h v_{n+½} into sout.x. Returns the field and gravity work of the half
+    kick (h/2 f·v̄ of its electric and gravity parts) [J]."""
+    nodes, fld = phys.nodes, phys.field
+    inv_mass, mass, charge = nodes.inv_mass, nodes.mass, nodes.charge
+    grav = fld.gravity
+    x0, v0, f0, e0 = sin.x, sin.v, sin.f, sin.e
+    x1, v1 = sout.x, sout.v
+    half = 0.5 * dt
+    w_field = 0.0
+    w_grav = 0.0
+    for n in range(x0.shape[1]):
+        im = inv_mass[n]
+        if im == 0.0:
+            for c in range(3):
+                x1[c, n] = x0[c, n]
+                v1[c, n] = v0[c, n]
+            continue
+        q = charge[n]
+        _e, b = node_field(fld, work.node_field, n, (x0[0, n], x0[1, n], x0[2, n]), t0)
+        # the State's force is ψ(t) with the magnetic part (as the φ-scheme's): without it
+        fm = magnetic_force(q, (v0[0, n], v0[1, n], v0[2, n]), b)
+        vm = (v0[0, n] + half * (f0[0, n] - fm[0]) * im,
+              v0[1, n] + half * (f0[1, n] - fm[1]) * im,
+              v0[2, n] + half * (f0[2, n] - fm[2]) * im)
+        for c in range(3):
+            vbar = 0.5 * (v0[c, n] + vm[c])
+            w_field += half * q * e0[c, n] * vbar
+            w_grav += half * mass[n] * grav[c] * vbar
+        vh = rotate(vm, q * im, b, half)
+        for c in range(3):
+            v1[c, n] = vh[c]
+            x1[c, n] = x0[c, n] + dt * vh[c]
+    return w_field, w_grav
+
+
+@njit(cache=True)
+def _rotate_kick(phys, sout, work, t1, dt):
+    """Second half of every free node: v⁺ = R(B(x_{n+1}, t1), h/2) v_{n+½}, v_{n+1} = v⁺ +
+    h/(2m) f_{n+1}, in sout.v; then the magnetic force q v_{n+1} × B added to sout.f (the
+    State's force is the whole ψ(t), as the φ-scheme's). Returns the field and gravity work of
+    the half kick [J] and the sum of the nodes' |x| + |v| (finite unless the step blew up)."""
+    nodes, fld = phys.nodes, phys.field
+    inv_mass, mass, charge = nodes.inv_mass, nodes.mass, nodes.charge
+    grav = fld.gravity
+    x1, v1, f1, e1 = sout.x, sout.v, sout.f, sout.e
+    half = 0.5 * dt
+    w_field = 0.0
+    w_grav = 0.0
+    size = 0.0
+    for n in range(x1.shape[1]):
+        im = inv_mass[n]
+        if im == 0.0:
+            continue
+        q = charge[n]
+        size += abs(x1[0, n]) + abs(x1[1, n]) + abs(x1[2, n])
+        _e, b = node_field(fld, work.node_field, n, (x1[0, n], x1[1, n], x1[2, n]), t1)
+        vp = rotate((v1[0, n], v1[1, n], v1[2, n]), q * im, b, half)
+        for c in range(3):
+            vn = vp[c] + half * f1[c, n] * im
+            vbar = 0.5 * (vp[c] + vn)
+            w_field += half * q * e1[c, n] * vbar
+            w_grav += half * mass[n] * grav[c] * vbar
+            v1[c, n] = vn
+            size += abs(vn)
+        fm = magnetic_force(q, (v1[0, n], v1[1, n], v1[2, n]), b)
+        for c in range(3):
+            f1[c, n] += fm[c]
+    return w_field, w_grav, size
+
+
+@njit(cache=True)
+def _node_contact(phys, sin, sout, work, ncand):
+    """Contact of the candidate nodes after the drift (see the module docstring): impulses on
+    sout.v (the velocity before them in work.v_pre), placement on sout.x, the contact records
+    in work.c_*, the new contact state in sout.contact. The body's state in sout.body holds
+    the drifted position and rotation, its half-step velocity and the angular velocity at the
+    new rotation. Returns the number of contacts."""
+    nodes, body, law = phys.nodes, phys.body, phys.contact
+    mass = nodes.mass
+    b_state = sout.body
+    centre = b_state[BODY_X]
+    vel = b_state[BODY_V]
+    omega = (b_state[BODY_W, 0], b_state[BODY_W, 1], b_state[BODY_W, 2])
+    rot = b_state[BODY_R0:BODY_R0 + 3]
+    x1, v1 = sout.x, sout.v
+    was, now = sin.contact, sout.contact
+    cand, v_pre = work.cand, work.v_pre
+    c_node, c_node2, c_w = work.c_node, work.c_node2, work.c_w
+    c_imp, c_arm, c_nrm = work.c_imp, work.c_arm, work.c_nrm
+    keep = contact_margin(body)
+    nc = 0
+    for idx in range(ncand):
+        n = cand[idx]
+        for c in range(3):
+            v_pre[c, n] = v1[c, n]
+        d = (x1[0, n] - centre[0], x1[1, n] - centre[1], x1[2, n] - centre[2])
+        g, r, nh = surface_point(body, rot, d)
+        stuck = was[3, n] == STICK
+        if not (g < 0.0 or (was[3, n] != 0.0 and g < keep)):
+            continue
+        if stuck:
+            # where the material point it stuck to has moved
+            r = mat_vec(rot, (was[0, n], was[1, n], was[2, n]))
+            _g, _r, nh = surface_point(body, rot, r)
+        wr = cross(omega, r)
+        vs = (vel[0] + wr[0], vel[1] + wr[1], vel[2] + wr[2])
+        m = mass[n]
+        j, slid = contact_impulse(m, (v1[0, n], v1[1, n], v1[2, n]), vs, nh, law, 0)
+        if j[0] == 0.0 and j[1] == 0.0 and j[2] == 0.0:
+            # separating: let go; a node inside is still put on the surface where it is (the
+            # move carries no momentum)
+            if g < 0.0:
+                _g, r, nh = surface_point(body, rot, d)
+                for c in range(3):
+                    x1[c, n] = centre[c] + r[c]
+            continue
+        if slid and stuck:
+            # it slides off its material point: on the surface where it is
+            _g, r, nh = surface_point(body, rot, d)
+        if not slid:
+            a = to_body_frame(rot, r)
+            for c in range(3):
+                now[c, n] = a[c]
+        now[3, n] = SLIDE if slid else STICK
+        c_node[nc] = n
+        c_node2[nc] = -1
+        c_w[0, nc] = 1.0
+        c_w[1, nc] = 0.0
+        for c in range(3):
+            c_imp[c, nc] = j[c]
+            c_arm[c, nc] = r[c]
+            c_nrm[c, nc] = nh[c]
+            x1[c, n] = centre[c] + r[c]
+            v1[c, n] += j[c] / m
+        nc += 1
+    return nc
+
+
+@njit(cache=True)
+def _contact_dissipation(nc, work, v_post, v_body, w_body, reaction, mass_body, w_after):
+    """Normal and friction dissipation of the step's impulses [J], −J·(v̄_point − v̄_node)
+    split along the normal (v̄ the mean of before and after the impulses)."""
+    d_cont = 0.0
+    d_fric = 0.0
+    c_node, c_node2, c_w = work.c_node, work.c_node2, work.c_w
+    c_imp, c_arm, c_nrm = work.c_imp, work.c_arm, work.c_nrm
+    v_pre = work.v_pre
+    vb = (v_body[0] + 0.5 * reaction[0, 0] / mass_body,
+          v_body[1] + 0.5 * reaction[0, 1] / mass_body,
+          v_body[2] + 0.5 * reaction[0, 2] / mass_body)
+    wb = (0.5 * (w_body[0] + w_after[0]), 0.5 * (w_body[1] + w_after[1]),
+          0.5 * (w_body[2] + w_after[2]))
+    for k in range(nc):
+        a = c_node[k]
+        b = c_node2[k]
+        wa = c_w[0, k]
+        vp = (wa * 0.5 * (v_pre[0, a] + v_post[0, a]), wa * 0.5 * (v_pre[1, a] + v_post[1, a]),
+              wa * 0.5 * (v_pre[2, a] + v_post[2, a]))
+        if b >= 0:
+            wb_ = c_w[1, k]
+            vp = (vp[0] + wb_ * 0.5 * (v_pre[0, b] + v_post[0, b]),
+                  vp[1] + wb_ * 0.5 * (v_pre[1, b] + v_post[1, b]),
+                  vp[2] + wb_ * 0.5 * (v_pre[2, b] + v_post[2, b]))
+        r = vec(c_arm[:, k])
+        nh = vec(c_nrm[:, k])
+        jv = vec(c_imp[:, k])
+        wr = cross(wb, r)
+        rel = (vb[0] + wr[0] - vp[0], vb[1] + wr[1] - vp[1], vb[2] + wr[2] - vp[2])
+        jn = dot(jv, nh)
+        d_cont += jn * dot(nh, rel)
+        d_fric += dot((jv[0] - jn * nh[0], jv[1] - jn * nh[1], jv[2] - jn * nh[2]), rel)
+    return d_cont, d_fric
+
+
+@njit(cache=True)
+def _body_field_work(phys, b0, b1, t0, t1):
+    """Work of the electric field on the body's charges over the step [J] (the mean field at
+    the two ends times each charge's displacement)."""
+    body, fld = phys.body, phys.field
+    w = 0.0
+    rot0 = b0[BODY_R0:BODY_R0 + 3]
+    rot1 = b1[BODY_R0:BODY_R0 + 3]
+    for k in range(body.charge.shape[0]):
+        r0 = mat_vec(rot0, body.charge_pos[k])
+        r1 = mat_vec(rot1, body.charge_pos[k])
+        p0 = (b0[BODY_X, 0] + r0[0], b0[BODY_X, 1] + r0[1], b0[BODY_X, 2] + r0[2])
+        p1 = (b1[BODY_X, 0] + r1[0], b1[BODY_X, 1] + r1[1], b1[BODY_X, 2] + r1[2])
+        e0, _b0 = field_at(fld, p0, t0)
+        e1, _b1 = field_at(fld, p1, t1)
+        for c in range(3):
+            w += body.charge[k] * 0.5 * (e0[c] + e1[c]) * (p1[c] - p0[c])
+    return w
+
+
+@njit(cache=True, nogil=True)
+def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
+    """One central-difference step from sin (at t) to sout (at t + Δt): nodes, body, contact,
+    damage committed, the energy terms of the step added to energy (6,). sin is never written.
+    Exactly one of rowbuf (ROWBUF_ROWS, nx + 1: the serial force kernel) and threads (blocks,
+    ROWBUF_ROWS, nx + 1: the threaded one) is an array, the other None (only the kernel in use
+    is compiled); both give the same numbers.
+
+    Returns (status, contacts): OK; NOT_FINITE (a non-finite value: Δt too large or the run
+    diverged); CONTACT_MISSED (a free node ended inside the body without being a contact
+    candidate); BODY_NOT_CONVERGED (the mid-step rotation did not converge)."""
+    nodes, body, fld = phys.nodes, phys.body, phys.field
+    inv_mass = nodes.inv_mass
+    b_in, b_out = sin.body, sout.body
+    t1 = t + dt
+    half = 0.5 * dt
+    copy_into(b_out, b_in)
+    # where the damage law can change α this step (materials.damage_thresholds)
+    damage_thresholds(sin.alpha, phys.material, work.damage_thr, work.damage_alpha)
+    # contact candidates: nodes that can reach the body within this step (from the start)
+    ncand = 0
+    nseg = 0
+    flag = work.flag
+    if body.active:
+        vmax = 0.0
+        for n in range(sin.x.shape[1]):
+            vmax = max(vmax, sin.v[0, n] ** 2 + sin.v[1, n] ** 2 + sin.v[2, n] ** 2)
+        radius = bounding_radius(body)
+        speed = norm(b_in[BODY_V]) + radius * norm(b_in[BODY_W])
+        reach = 1.05 * radius + 2.0 * dt * (speed + math.sqrt(vmax))
+        ncand = find_candidates(sin.x, inv_mass, b_in[BODY_X], reach, work.cand, flag)
+        if phys.contact.segments:
+            ncand, nseg = find_segment_candidates(phys.yarns, sin.alpha,
+                                                  phys.material.broken_below, sin.x,
+                                                  inv_mass, b_in[BODY_X], reach, work, ncand)
+    else:
+        flag[:] = 0
+    work.counts[0] = ncand
+    work.counts[1] = nseg
+    # nodes: the first half kick and rotation at (x_n, t), then the drift
+    if with_sources(fld):
+        fill_node_fields(fld, sin.x, sin.v, 0.0, t, work.node_field)
+    w_field, w_grav = _kick_rotate_drift(phys, sin, sout, work, t, dt)
+    for n in range(sout.contact.shape[1]):
+        for c in range(4):
+            sout.contact[c, n] = 0.0
+    # body: half kick of V and H, the drift of the centre and the rotation
+    scratch = work.body_scratch
+    reaction = work.reaction
+    for c in range(3):
+        reaction[0, c] = 0.0
+        reaction[1, c] = 0.0
+    nc = 0
+    h_half = (0.0, 0.0, 0.0)
+    w_pre = (0.0, 0.0, 0.0)
+    if body.active:
+        mass = body.mass
+        rot0 = b_in[BODY_R0:BODY_R0 + 3]
+        rot1 = b_out[BODY_R0:BODY_R0 + 3]
+        h0 = world_inertia_times(rot0, body.inertia, vec(b_in[BODY_W]))
+        h_half = (h0[0] + half * b_in[BODY_M, 0], h0[1] + half * b_in[BODY_M, 1],
+                  h0[2] + half * b_in[BODY_M, 2])
+        for c in range(3):
+            v_half = b_in[BODY_V, c] + half * b_in[BODY_F, c] / mass
+            w_grav += half * mass * fld.gravity[c] * 0.5 * (b_in[BODY_V, c] + v_half)
+            b_out[BODY_V, c] = v_half
+            b_out[BODY_X, c] = b_in[BODY_X, c] + dt * v_half
+        _w_mid, ok = _mid_rotation(body, rot0, h_half, dt, tol, scratch, rot1)
+        if not ok:
+            return BODY_NOT_CONVERGED, 0
+        # the angular velocity at the new rotation before contact: the surface's velocity
+        w_pre = _spin_solve(rot1, body, h_half, scratch)
+        for c in range(3):
+            b_out[BODY_W, c] = w_pre[c]
+        # contact and friction at the drifted positions (kept for the energy bookkeeping)
+        for idx in range(ncand):
+            n = work.cand[idx]
+            for c in range(3):
+                work.xbuf[c, n] = sout.x[c, n]
+        nc = _node_contact(phys, sin, sout, work, ncand)
+        if phys.contact.segments:
+            nc = segment_contact(nodes, phys.yarns, body, phys.contact, b_out, nseg, nc,
+                                 sout.x, sout.v, work)
+        reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, reaction[0], reaction[1])
+    # the forces at the new positions and time: the one force evaluation of the step
+    if with_sources(fld):
+        fill_node_fields(fld, sout.x, sout.v, 0.0, t1, work.node_field)
+    if rowbuf is None:
+        if threads is not None:
+            node_forces_threads(phys, sout.x, sin, sout, work, t1, threads)
+    else:
+        node_forces(phys, sout.x, sin, sout, work, t1, rowbuf)
+    electric_at_nodes(fld, work.node_field, sout.x, t1, sout.e)
+    # energy of the contacts (velocities before and after the impulses, at the half step)
+    d_cont = 0.0
+    d_fric = 0.0
+    if body.active:
+        h_after = (h_half[0] + reaction[1, 0], h_half[1] + reaction[1, 1],
+                   h_half[2] + reaction[1, 2])
+        rot1 = b_out[BODY_R0:BODY_R0 + 3]
+        w_post = _spin_solve(rot1, body, h_after, scratch)
+        d_cont, d_fric = _contact_dissipation(nc, work, sout.v, b_out[BODY_V], w_pre, reaction,
+                                              body.mass, w_post)
+        # the body after the impulses, then its field wrench and the second half kick
+        for c in range(3):
+            b_out[BODY_V, c] += reaction[0, c] / body.mass
+            b_out[BODY_W, c] = w_post[c]
+        field_wrench(body, fld, t1, b_out, b_out[BODY_F], b_out[BODY_M])
+        h1 = (h_after[0] + half * b_out[BODY_M, 0], h_after[1] + half * b_out[BODY_M, 1],
+              h_after[2] + half * b_out[BODY_M, 2])
+        for c in range(3):
+            v_half = b_out[BODY_V, c]
+            v_end = v_half + half * b_out[BODY_F, c] / body.mass
+            w_grav += half * body.mass * fld.gravity[c] * 0.5 * (v_half + v_end)
+            b_out[BODY_V, c] = v_end
+        w1 = _spin_solve(rot1, body, h1, scratch)
+        for c in range(3):
+            b_out[BODY_W, c] = w1[c]
+        if has_electric_field(fld):
+            w_field += _body_field_work(phys, b_in, b_out, t, t1)
+    # the work of the node force over the displacement the kicks do not see: the kicks book
+    # h/2 f·v̄ with the velocity before contact in the first and after it in the second, i.e. a
+    # displacement h (v⁻ + v⁺)/2, while the node moved h v⁻ and then was placed: the difference
+    # is the placement jump less h/2 of the contact's velocity change
+    d_proj = 0.0
+    for idx in range(ncand if body.active else 0):
+        n = work.cand[idx]
+        for c in range(3):
+            moved = (sout.x[c, n] - work.xbuf[c, n]
+                     - half * (sout.v[c, n] - work.v_pre[c, n]))
+            d_proj += sout.f[c, n] * moved
+    # nodes: the second half rotation and kick
+    wf2, wg2, size = _rotate_kick(phys, sout, work, t1, dt)
+    w_field += wf2
+    w_grav += wg2
+    d_dam = damage_release(phys.yarns, phys.material, sout.x, sin.alpha, sout.alpha)
+    energy[ENERGY_WORK_FIELD] += w_field
+    energy[ENERGY_WORK_GRAVITY] += w_grav
+    energy[ENERGY_FRICTION] += d_fric
+    energy[ENERGY_CONTACT] += d_cont
+    energy[ENERGY_PROJECTION] += d_proj
+    energy[ENERGY_DAMAGE] += d_dam
+    total = w_field + w_grav + d_cont + d_fric + d_proj + d_dam + size
+    for c in range(3):
+        total += b_out[BODY_V, c] + b_out[BODY_W, c]
+    if not math.isfinite(total):
+        return NOT_FINITE, nc
+    if body.active and nodes_inside(sout.x, inv_mass, flag, body, b_out) > 0:
+        return CONTACT_MISSED, nc
+    return OK, nc

@@ -1,0 +1,119 @@
+"""Central differences: explicit, one force evaluation per step (emfabric._kernels.explicit).
+
+Δt = min(courant × the stability limit of the current state, the no-tunnelling limit, dt_max,
+what is left to the end), recomputed every step: the limit 2/ω_max follows the yarns as they
+stretch or break (explicit.stable_step), the no-tunnelling limit keeps the body from moving
+more than a quarter of its radius relative to the fabric per step (explicit.travel_step). A
+step whose body rotation does not converge or that leaves a free node inside the body is
+retried at half the step; a non-finite step is a DivergenceError.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from emfabric._kernels.explicit import (
+    BODY_NOT_CONVERGED,
+    CONTACT_MISSED,
+    NOT_FINITE,
+    OK,
+    central_step,
+    stable_step,
+    travel_step,
+)
+from emfabric._kernels.nodes import ROWBUF_ROWS, ROWS_PER_BLOCK
+from emfabric._kernels.records import make_work
+from emfabric.integrators.base import IntegratorBase, StepInfo
+from emfabric.sim.fastcall import Direct
+from emfabric.sim.model import Model
+from emfabric.sim.state import State
+
+RETRIES = 30
+"""Halvings of a step before the run is declared diverged."""
+ROTATION_TOLERANCE = 1e-12
+"""Relative tolerance of the body's mid-step rotation (eq. B16)."""
+
+
+class CentralDifference(IntegratorBase):
+    """Central differences for one Model."""
+
+    name = "central-difference"
+
+    def __init__(self, model: Model, *, threads: bool | None = None):
+        """threads: use the row-block threaded force kernel (default: as the φ-scheme, for
+        sheets of at least phi.THREADS_FROM_NODES nodes when Numba has more than one thread);
+        the numbers are the same either way."""
+        from emfabric.integrators.phi import THREADS_FROM_NODES
+
+        super().__init__(model)
+        if threads is None:
+            threads = (model.node_count >= THREADS_FROM_NODES
+                       and numba.config.NUMBA_NUM_THREADS > 1)
+        self.threaded = threads
+        opts = model.options
+        self.courant = opts.courant
+        self.dt_max = opts.dt_max
+        self.dt_min = opts.dt_min
+        self.work = make_work(model.nx, model.ny,
+                              model.seg_count if model.physics.contact.segments else 0)
+        self.rowbuf = None if threads else np.empty((ROWBUF_ROWS, model.nx + 1))
+        self.threads = (np.empty((-(-model.ny // ROWS_PER_BLOCK), ROWBUF_ROWS, model.nx + 1))
+                        if threads else None)
+        self.scratch = np.empty(model.node_count)
+        self._step = Direct(central_step)
+        self._stable = Direct(stable_step)
+        self._travel = Direct(travel_step)
+
+    def variant(self, threaded: bool | None = None) -> str:
+        threaded = self.threaded if threaded is None else threaded
+        return f"central-difference-{'threads' if threaded else 'serial'}"
+
+    def stable_dt(self, state: State) -> float:
+        """The step central differences take from this state [s] (before dt_limit)."""
+        crit = self._stable(None, self.physics, state.node_x, state.seg_alpha, self.scratch)
+        travel = self._travel(None, self.physics, state.node_x, state.node_v, state.body)
+        return min(self.courant * crit, travel, self.dt_max)
+
+    def step(self, s_in: State, s_out: State, *, dt_limit: float = math.inf) -> StepInfo:
+        """Advance s_in by one step into s_out; s_in is left untouched."""
+        dt = min(self.stable_dt(s_in), dt_limit)
+        rejected = 0
+        s_out.energy[:] = s_in.energy
+        while True:
+            status, nc = self._step(self.threaded, self.physics, s_in.arrays, s_out.arrays,
+                                    self.work, self.rowbuf, self.threads, s_in.t, dt,
+                                    ROTATION_TOLERANCE, s_out.energy)
+            if status == OK:
+                break
+            if status == NOT_FINITE:
+                self.fail(s_in, dt, "non-finite values in an explicit step (the step is "
+                          f"{dt / self.courant:.3g} s × courant; the state is not physical)")
+            rejected += 1
+            s_out.energy[:] = s_in.energy
+            dt *= 0.5
+            if rejected > RETRIES or dt < self.dt_min:
+                what = ("the projectile's rotation (eq. B16) did not converge"
+                        if status == BODY_NOT_CONVERGED else
+                        "a fabric node inside the projectile" if status == CONTACT_MISSED
+                        else f"status {status}")
+                self.fail(s_in, dt, f"{what} even at Δt = {dt:.3g} s")
+        s_out.t = s_in.t + dt
+        s_out.energy_initial = s_in.energy_initial
+        s_out.steps = s_in.steps + 1
+        s_out.rejected = s_in.rejected + rejected
+        s_out.evaluations = s_in.evaluations + 1 + rejected
+        s_out.iterations = 1
+        s_out.error = 0.0
+        s_out.last_dt = dt
+        s_out.contact_count = nc
+        s_out.contact_steps = s_in.contact_steps + (1 if nc > 0 else 0)
+        s_out.contact_force[:] = self.work.reaction[0] / dt
+        s_out.dt = self.stable_dt(s_out)
+        return StepInfo(t=s_out.t, dt=dt, iterations=1, error=0.0, rejected=rejected,
+                        evaluations=1 + rejected, contacts=nc)
+
+
+__all__ = ["CentralDifference"]

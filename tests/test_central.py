@@ -1,0 +1,189 @@
+"""Central differences (solver.integrator = "central-difference"): closed forms and invariants."""
+
+import math
+
+import numpy as np
+import pytest
+
+from emfabric.config.scenario import load_scenario
+from emfabric.integrators import CentralDifference, make_integrator
+from emfabric.runner.loop import resume, run
+from emfabric.sim.builder import build_model
+from emfabric.sim.state import initial_state
+
+from conftest import fabric_only, interrupted_demo, make
+
+CD = {"solver.integrator": "central-difference"}
+
+
+def _free_sheet(n=2, **kw):
+    """A rigid free sheet (every node the same velocity: no yarn stretches); soft yarns, so the
+    step is dt_max."""
+    return fabric_only(**{
+        "fabric.nodes": [n, n], "fabric.size": [0.1, 0.1], "fabric.edges": "free",
+        "fabric.areal_density": 0.04, "fabric.material.youngs_modulus": 1.0, **CD, **kw})
+
+
+def _march(sc, steps):
+    model = build_model(sc)
+    integ = make_integrator(model)
+    assert isinstance(integ, CentralDifference)
+    s, s2 = initial_state(model), initial_state(model)
+    for _ in range(steps):
+        integ.step(s, s2)
+        s, s2 = s2, s
+    return model, s
+
+
+@pytest.mark.parametrize("dt", [2e-3, 1e-2])
+def test_cyclotron_frequency_is_exact(dt):
+    """A charged node in uniform B turns at exactly ω_c = qB/m, whatever ω_c Δt (0.2 and 1
+    here): the magnetic rotation is exact in angle and magnitude."""
+    sc = _free_sheet(**{"fabric.velocity": [3.0, 0.0, 0.0], "field.B": [0.0, 0.0, 0.01],
+                        "fabric.charge_per_node": 1.0, "solver.dt_max": dt})
+    steps = round(0.2 / dt)
+    model, s = _march(sc, steps)
+    wc = 1.0 * 0.01 / model.nodes.mass[0]  # 100 rad/s
+    theta = wc * steps * dt
+    v = s.node_v[:, 0]
+    assert np.allclose(v, [3 * math.cos(theta), -3 * math.sin(theta), 0.0], rtol=0, atol=1e-12)
+
+
+def test_e_cross_b_motion_is_second_order():
+    """A charged node in E ⟂ B: the exact orbit is the E × B drift plus gyration; the
+    position error at a fixed time falls 4× per halving of Δt (second order)."""
+    q, e0, b0, v0 = 1.0, 0.02, 0.01, 3.0
+
+    def error(dt):
+        sc = _free_sheet(**{"fabric.velocity": [v0, 0.0, 0.0], "field.B": [0.0, 0.0, b0],
+                            "field.E": [0.0, e0, 0.0], "fabric.charge_per_node": q,
+                            "solver.dt_max": dt})
+        steps = round(0.05 / dt)
+        model, s = _march(sc, steps)
+        m = model.nodes.mass[0]
+        wc, t = q * b0 / m, steps * dt
+        drift = e0 / b0  # E × B / B² = (e0 / b0) x̂
+        # v(t) = drift x̂ + (v0 − drift)(cos ωt, −sin ωt): its integral
+        u = v0 - drift
+        dx = drift * t + u * math.sin(wc * t) / wc
+        dy = u * (math.cos(wc * t) - 1.0) / wc
+        return np.hypot(s.node_x[0, 0] - model.nodes.x0[0, 0] - dx,
+                        s.node_x[1, 0] - model.nodes.x0[1, 0] - dy)
+
+    e1, e2, e3 = error(2e-3), error(1e-3), error(5e-4)
+    assert e1 / e2 > 3.6 and e2 / e3 > 3.6
+
+
+def _struck(**kw):
+    """A free 15 × 15 sheet struck obliquely by a spinning sphere, no field."""
+    return make(**{"fabric.nodes": [15, 15], "fabric.edges": "free", "field.B": [0, 0, 0],
+                   "projectile.velocity": [40.0, -25.0, -250.0],
+                   "projectile.angular_velocity": [300.0, -200.0, 1000.0],
+                   "projectile.gap": 0.0, "solver.end_time": 40e-6, **CD, **kw})
+
+
+def test_free_fabric_struck_conserves_momentum():
+    """Free sheet + spinning sphere struck obliquely, no field: linear momentum of the pair is
+    conserved to round-off (the body receives exactly −J); angular momentum to a first-order
+    error in Δt (the placement on the surface moves a node without momentum, as in the
+    φ-scheme: test_impact.py), halving with the step."""
+    errors = []
+    for courant in (0.5, 0.25, 0.125):
+        ds = run(_struck(**{"solver.courant": courant, "solver.end_time": 60e-6})).history
+        assert int(ds.contact_nodes.max()) >= 3
+        p = ds.fabric_momentum.values + ds.projectile_momentum.values
+        assert np.abs(p - p[0]).max() < 1e-14 * np.abs(p[0]).max()
+        ang = ds.fabric_angular_momentum.values + ds.projectile_angular_momentum.values
+        errors.append(np.linalg.norm(ang - ang[0], axis=1).max() / np.linalg.norm(ang[0]))
+    assert errors[0] < 1e-4
+    assert (errors[0] / errors[-1]) ** 0.5 >= 1.8, errors
+
+
+def test_head_on_impact_spins_nothing_to_the_bit():
+    """No field, no modulus scatter, head-on on a clamped sheet: ω stays exactly zero and the
+    sphere moves exactly along −z (the mirror symmetries are kept to the bit)."""
+    sc = make(**{"fabric.nodes": [16, 16], "fabric.material.modulus_cv": 0.0,
+                 "field.B": [0, 0, 0], "projectile.gap": 0.0, "solver.end_time": 40e-6, **CD})
+    ds = run(sc).history
+    assert int(ds.contact_nodes.max()) >= 4
+    assert np.all(ds.angular_velocity.values == 0.0)
+    assert np.all(ds.projectile_velocity.values[:, :2] == 0.0)
+
+
+def test_field_mirror_runs_mirror_to_the_bit():
+    """B → −B (along x) mirrors the run in y: ω_x changes sign to the bit."""
+    base = {"fabric.nodes": [14, 14], "fabric.material.modulus_cv": 0.0, "projectile.gap": 0.0,
+            "solver.end_time": 30e-6, **CD}
+    a = run(make(**base, **{"field.B": [0.05, 0, 0]})).history
+    b = run(make(**base, **{"field.B": [-0.05, 0, 0]})).history
+    assert float(np.abs(a.angular_velocity.values[:, 0]).max()) > 0.0
+    np.testing.assert_array_equal(a.angular_velocity.values[:, 0],
+                                  -b.angular_velocity.values[:, 0])
+    np.testing.assert_array_equal(a.projectile_velocity.values[:, 2],
+                                  b.projectile_velocity.values[:, 2])
+
+
+def test_stable_step_of_a_sheet_at_rest():
+    """At rest every interior node has four yarns of stiffness k = 𝔼A0/L0: the Gershgorin bound
+    ω_max² = 2·4k/m gives the stable step 2/√(8k/m); courant takes that fraction."""
+    sc = fabric_only(**{"fabric.nodes": [9, 9], **CD, "solver.courant": 0.5})
+    model = build_model(sc)
+    integ = CentralDifference(model)
+    k = float(model.yarns.stiffness.max())
+    m = float(model.nodes.mass[0])
+    assert integ.stable_dt(initial_state(model)) == pytest.approx(
+        min(0.5 * 2.0 / math.sqrt(8.0 * k / m), sc.solver.dt_max), rel=1e-12)
+
+
+def test_thin_fast_wire_does_not_tunnel():
+    """A 0.1 mm wire at 1500 m/s lying across the yarns meets the fabric (the step keeps the
+    body from moving more than a quarter of its radius per step) instead of passing between
+    two steps."""
+    sc = make(**{"fabric.nodes": [21, 21], "field.B": [0, 0, 0],
+                 "projectile.shape": "cylinder", "projectile.radius": 5e-5,
+                 "projectile.length": 0.02, "projectile.mass": 1e-3,
+                 "projectile.axis": [1.0, 0.0, 0.0], "projectile.gap": 1e-4,
+                 "projectile.velocity": [0.0, 0.0, -1500.0], "solver.end_time": 2e-6, **CD})
+    res = run(sc)
+    assert int(res.history.contact_nodes.max()) > 0
+    assert res.end_reason != "never touched"
+
+
+SMALL = {"fabric.nodes": [12, 12], "solver.end_time": 120e-6, "output.snapshot_interval": 5e-6,
+         "projectile.gap": 0.0, **CD}
+
+
+def test_ctrl_c_then_resume_is_bitwise_the_uninterrupted_run(tmp_path):
+    """Central differences resume from a checkpoint to the uninterrupted run, bit for bit (the
+    State holds each node's contact and material point)."""
+    full = tmp_path / "full"
+    run(load_scenario("demo-small", SMALL), full)
+    part = tmp_path / "part"
+    interrupted_demo(part, SMALL, after=25)
+    resume(part)
+    import xarray as xr
+
+    for name in ("history.nc", "snapshots.nc"):
+        x, y = xr.open_dataset(part / name), xr.open_dataset(full / name)
+        assert x.sizes == y.sizes
+        for v in y.variables:
+            np.testing.assert_array_equal(x[v].values, y[v].values, err_msg=f"{name}: {v}")
+
+
+def test_threaded_force_kernel_gives_identical_results():
+    """The row-block threaded force kernel gives the serial kernel's run bit for bit."""
+    sc = load_scenario("demo-small", {"fabric.nodes": [40, 40], "solver.end_time": 15e-6,
+                                      "projectile.gap": 0.0, **CD})
+    model = build_model(sc)
+    states = []
+    for threads in (False, True):
+        integ = CentralDifference(model, threads=threads)
+        s, s2 = initial_state(model), initial_state(model)
+        while s.t < 15e-6:
+            integ.step(s, s2)
+            s, s2 = s2, s
+        states.append(s)
+    a, b = states
+    assert a.steps == b.steps and a.contact_count > 0
+    for name in ("node_x", "node_v", "node_f", "seg_alpha", "body", "energy", "node_contact"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
