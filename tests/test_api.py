@@ -58,3 +58,18 @@ def test_initial_pose_of_a_sphere_and_an_ogive(gap):
                                          "projectile.nose_length": nose_len,
                                          "projectile.gap": gap, "fabric.nodes": [5, 5]}))
     assert np.array_equal(model.body_x0, pose.position)
+
+
+def test_thread_count_chooses_the_kernel():
+    """threads=1 runs the serial kernel, more the threaded one; by default a sheet below
+    THREADS_FROM_NODES nodes runs serially (not slower idle, much faster on a loaded machine)."""
+    import numba
+
+    from emfabric.integrators import default_threads, make_integrator
+
+    for integrator in ("phi", "central-difference"):
+        model = emfabric.build_model(_small(**{"solver.integrator": integrator}))
+        assert default_threads(model) == 1
+        assert not make_integrator(model).threaded
+        assert not make_integrator(model, threads=1).threaded
+        assert make_integrator(model, threads=2).threaded == (numba.config.NUMBA_NUM_THREADS > 1)

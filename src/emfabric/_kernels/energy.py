@@ -80,35 +80,12 @@ def step_energy(phys, sin, sout, nc, work, t0, phi, dt, out):
     for c in range(3):
         w_grav += body.mass * grav[c] * (b_out[BODY_X, c] - b_in[BODY_X, c])
 
-    d_fric = 0.0
-    d_cont = 0.0
     d_proj = 0.0
-    c_node, c_node2, c_w = work.c_node, work.c_node2, work.c_w
-    c_imp, c_arm, c_nrm = work.c_imp, work.c_arm, work.c_nrm
+    vbar = (0.5 * (b_in[BODY_V, 0] + b_out[BODY_V, 0]), 0.5 * (b_in[BODY_V, 1] + b_out[BODY_V, 1]),
+            0.5 * (b_in[BODY_V, 2] + b_out[BODY_V, 2]))
     wbar = (0.5 * (b_in[BODY_W, 0] + b_out[BODY_W, 0]), 0.5 * (b_in[BODY_W, 1] + b_out[BODY_W, 1]),
             0.5 * (b_in[BODY_W, 2] + b_out[BODY_W, 2]))
-    for k in range(nc):
-        # the fabric point the impulse acts on: a node, or w_a x_a + w_b x_b on a segment
-        a = c_node[k]
-        b = c_node2[k]
-        wa = c_w[0, k]
-        vp = (wa * 0.5 * (v0[0, a] + v1[0, a]), wa * 0.5 * (v0[1, a] + v1[1, a]),
-              wa * 0.5 * (v0[2, a] + v1[2, a]))
-        if b >= 0:
-            wb = c_w[1, k]
-            vp = (vp[0] + wb * 0.5 * (v0[0, b] + v1[0, b]),
-                  vp[1] + wb * 0.5 * (v0[1, b] + v1[1, b]),
-                  vp[2] + wb * 0.5 * (v0[2, b] + v1[2, b]))
-        r = vec(c_arm[:, k])
-        nh = vec(c_nrm[:, k])
-        jv = vec(c_imp[:, k])
-        wr = cross(wbar, r)
-        rel = (0.5 * (b_in[BODY_V, 0] + b_out[BODY_V, 0]) + wr[0] - vp[0],
-               0.5 * (b_in[BODY_V, 1] + b_out[BODY_V, 1]) + wr[1] - vp[1],
-               0.5 * (b_in[BODY_V, 2] + b_out[BODY_V, 2]) + wr[2] - vp[2])
-        jn = dot(jv, nh)
-        d_cont += jn * dot(nh, rel)
-        d_fric += dot((jv[0] - jn * nh[0], jv[1] - jn * nh[1], jv[2] - jn * nh[2]), rel)
+    d_cont, d_fric = impulse_dissipation(nc, work, v0, v1, vbar, wbar)
     # the contact candidates' displacement beyond the φ-update, δ = Δx − Δt(φ v1 + (1−φ) v0):
     # the work of the non-impulsive, non-magnetic forces over it is not seen by the velocity
     # update (zero, to round-off, for a node that contact did not move)
@@ -147,3 +124,38 @@ def damage_release(yarns, mat, x, alpha_before, alpha_after):
                             yarns.inv_rest2[s])
             d_dam += drop * coef[s] * rest[s] * rest[s] * strain_energy_density(u2, mat)
     return d_dam
+
+
+@njit(cache=True)
+def impulse_dissipation(nc, work, v_before, v_after, v_body, w_body):
+    """Normal and friction dissipation [J] of the step's nc contact impulses (work.c_*): for
+    each, −J·(v̄_point − v̄_fabric) split along the normal, v̄_fabric the mean of the fabric
+    point's velocity before and after (a node, or w_a, w_b of a segment's two nodes), v̄_point
+    the body surface point's from the body's mean velocity v_body and angular velocity w_body.
+    The kinetic energy the impulses remove from fabric + body is exactly their sum."""
+    d_cont = 0.0
+    d_fric = 0.0
+    c_node, c_node2, c_w = work.c_node, work.c_node2, work.c_w
+    c_imp, c_arm, c_nrm = work.c_imp, work.c_arm, work.c_nrm
+    for k in range(nc):
+        # the fabric point the impulse acts on: a node, or w_a x_a + w_b x_b on a segment
+        a = c_node[k]
+        b = c_node2[k]
+        wa = c_w[0, k]
+        vp = (wa * 0.5 * (v_before[0, a] + v_after[0, a]),
+              wa * 0.5 * (v_before[1, a] + v_after[1, a]),
+              wa * 0.5 * (v_before[2, a] + v_after[2, a]))
+        if b >= 0:
+            wb = c_w[1, k]
+            vp = (vp[0] + wb * 0.5 * (v_before[0, b] + v_after[0, b]),
+                  vp[1] + wb * 0.5 * (v_before[1, b] + v_after[1, b]),
+                  vp[2] + wb * 0.5 * (v_before[2, b] + v_after[2, b]))
+        r = vec(c_arm[:, k])
+        nh = vec(c_nrm[:, k])
+        jv = vec(c_imp[:, k])
+        wr = cross(w_body, r)
+        rel = (v_body[0] + wr[0] - vp[0], v_body[1] + wr[1] - vp[1], v_body[2] + wr[2] - vp[2])
+        jn = dot(jv, nh)
+        d_cont += jn * dot(nh, rel)
+        d_fric += dot((jv[0] - jn * nh[0], jv[1] - jn * nh[1], jv[2] - jn * nh[2]), rel)
+    return d_cont, d_fric

@@ -42,7 +42,7 @@ from emfabric._kernels.contact import (
     reaction_sums,
     segment_contact,
 )
-from emfabric._kernels.energy import damage_release
+from emfabric._kernels.energy import damage_release, impulse_dissipation
 from emfabric._kernels.fields import (
     electric_at_nodes,
     field_at,
@@ -78,7 +78,6 @@ from emfabric._kernels.shapes import (
 from emfabric._kernels.vec3 import (
     copy_into,
     cross,
-    dot,
     mat_mul,
     mat_vec,
     norm,
@@ -325,42 +324,6 @@ def _node_contact(phys, sin, sout, work, ncand):
 
 
 @njit(cache=True)
-def _contact_dissipation(nc, work, v_post, v_body, w_body, reaction, mass_body, w_after):
-    """Normal and friction dissipation of the step's impulses [J], −J·(v̄_point − v̄_node)
-    split along the normal (v̄ the mean of before and after the impulses)."""
-    d_cont = 0.0
-    d_fric = 0.0
-    c_node, c_node2, c_w = work.c_node, work.c_node2, work.c_w
-    c_imp, c_arm, c_nrm = work.c_imp, work.c_arm, work.c_nrm
-    v_pre = work.v_pre
-    vb = (v_body[0] + 0.5 * reaction[0, 0] / mass_body,
-          v_body[1] + 0.5 * reaction[0, 1] / mass_body,
-          v_body[2] + 0.5 * reaction[0, 2] / mass_body)
-    wb = (0.5 * (w_body[0] + w_after[0]), 0.5 * (w_body[1] + w_after[1]),
-          0.5 * (w_body[2] + w_after[2]))
-    for k in range(nc):
-        a = c_node[k]
-        b = c_node2[k]
-        wa = c_w[0, k]
-        vp = (wa * 0.5 * (v_pre[0, a] + v_post[0, a]), wa * 0.5 * (v_pre[1, a] + v_post[1, a]),
-              wa * 0.5 * (v_pre[2, a] + v_post[2, a]))
-        if b >= 0:
-            wb_ = c_w[1, k]
-            vp = (vp[0] + wb_ * 0.5 * (v_pre[0, b] + v_post[0, b]),
-                  vp[1] + wb_ * 0.5 * (v_pre[1, b] + v_post[1, b]),
-                  vp[2] + wb_ * 0.5 * (v_pre[2, b] + v_post[2, b]))
-        r = vec(c_arm[:, k])
-        nh = vec(c_nrm[:, k])
-        jv = vec(c_imp[:, k])
-        wr = cross(wb, r)
-        rel = (vb[0] + wr[0] - vp[0], vb[1] + wr[1] - vp[1], vb[2] + wr[2] - vp[2])
-        jn = dot(jv, nh)
-        d_cont += jn * dot(nh, rel)
-        d_fric += dot((jv[0] - jn * nh[0], jv[1] - jn * nh[1], jv[2] - jn * nh[2]), rel)
-    return d_cont, d_fric
-
-
-@njit(cache=True)
 def _body_field_work(phys, b0, b1, t0, t1):
     """Work of the electric field on the body's charges over the step [J] (the mean field at
     the two ends times each charge's displacement)."""
@@ -481,8 +444,13 @@ def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
                    h_half[2] + reaction[1, 2])
         rot1 = b_out[BODY_R0:BODY_R0 + 3]
         w_post = _spin_solve(rot1, body, h_after, scratch)
-        d_cont, d_fric = _contact_dissipation(nc, work, sout.v, b_out[BODY_V], w_pre, reaction,
-                                              body.mass, w_post)
+        mass = body.mass
+        v_mean = (b_out[BODY_V, 0] + 0.5 * reaction[0, 0] / mass,
+                  b_out[BODY_V, 1] + 0.5 * reaction[0, 1] / mass,
+                  b_out[BODY_V, 2] + 0.5 * reaction[0, 2] / mass)
+        w_mean = (0.5 * (w_pre[0] + w_post[0]), 0.5 * (w_pre[1] + w_post[1]),
+                  0.5 * (w_pre[2] + w_post[2]))
+        d_cont, d_fric = impulse_dissipation(nc, work, work.v_pre, sout.v, v_mean, w_mean)
         # the body after the impulses, then its field wrench and the second half kick
         for c in range(3):
             b_out[BODY_V, c] += reaction[0, c] / body.mass

@@ -50,6 +50,10 @@ def run(
         "--resume", help="Continue the run whose checkpoint is in this folder")] = None,
     force: Annotated[bool, typer.Option(
         "--force", help="Replace the run already in the output folder")] = False,
+    threads: Annotated[int | None, typer.Option(
+        "--threads", min=1, help="Numba threads for the node kernels (1: serial; default: 1 "
+                                 "below 250 x 250 nodes, else every core); the results are "
+                                 "the same")] = None,
 ) -> None:
     """Run a scenario; write history.nc, snapshots, ParaView files and a checkpoint into the output folder as the run goes (--resume DIR continues a stopped run)."""  # noqa: E501
     from emfabric.io.checkpoint import CHECKPOINT, CheckpointError, read_checkpoint
@@ -78,7 +82,7 @@ def run(
         out_dir = resume
 
         def start(progress_fn):
-            return resume_run(resume, given, progress=progress_fn)
+            return resume_run(resume, given, progress=progress_fn, threads=threads)
     else:
         sc = _load(scenario or "paper-field", set_)
         if out is not None:
@@ -98,7 +102,7 @@ def run(
             clear_run(out_dir)
 
         def start(progress_fn):
-            return run_scenario(sc, out_dir, progress=progress_fn)
+            return run_scenario(sc, out_dir, progress=progress_fn, threads=threads)
     show_messages()
     # Ctrl-C, SIGTERM and a closed terminal (SIGHUP) all stop the run with its files kept
     from emfabric.runner.loop import interrupt

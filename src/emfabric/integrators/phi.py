@@ -37,8 +37,10 @@ def step_factor(error: float, k: int, tol: float, k_target: int, p: float) -> fl
     return tol ** (1.0 / (p * k_target)) / error ** (1.0 / (p * k))
 
 
-THREADS_FROM_NODES = 32 * 32
-"""Sheets with at least this many nodes use the two-thread kernel."""
+THREADS_FROM_NODES = 250 * 250
+"""Sheets with at least this many nodes use the threaded kernel by default (make_integrator,
+default_threads); smaller ones the serial kernel, which is not slower idle and much faster on a
+loaded machine."""
 
 
 class Integrator(IntegratorBase):

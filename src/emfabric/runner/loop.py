@@ -77,6 +77,7 @@ def run(
     *,
     progress: ProgressFn | None = None,
     end_time: float | None = None,
+    threads: int | None = None,
 ) -> RunResult:
     """Run a scenario (or a Model from build_model, or one put together in Python) to its end;
     write history.nc, snapshots and checkpoints into out_dir if given, as the run goes. A Model
@@ -85,17 +86,18 @@ def run(
 
     Ctrl-C (KeyboardInterrupt) and divergence leave valid files marked partial/diverged and a
     checkpoint; the exception is re-raised after the files are written, with the result
-    attached as `.result`.
+    attached as `.result`. threads: Numba threads for the node kernels (1: the serial kernel;
+    default: integrators.default_threads for the problem's size); the numbers are the same.
     """
     model = scenario if isinstance(scenario, Model) else build_model(scenario)
     out = Path(out_dir) if out_dir is not None else None
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
-    return _loop(model, None, None, out, progress, end_time)
+    return _loop(model, None, None, out, progress, end_time, threads)
 
 
 def resume(out_dir: str | Path, scenario: Scenario | None = None, *,
-           progress: ProgressFn | None = None) -> RunResult:
+           progress: ProgressFn | None = None, threads: int | None = None) -> RunResult:
     """Continue the run whose checkpoint is in out_dir. The history it writes is bitwise the one
     an uninterrupted run writes. A scenario, if given, must equal the checkpoint's."""
     out = Path(out_dir)
@@ -116,14 +118,15 @@ def resume(out_dir: str | Path, scenario: Scenario | None = None, *,
     except (OSError, ValueError, KeyError) as err:
         raise CheckpointError(f"{out}: the history or snapshots written with the checkpoint "
                               f"cannot be read ({err})") from None
-    return _loop(model, state, (pos, rows, times), out, progress, None)
+    return _loop(model, state, (pos, rows, times), out, progress, None, threads)
 
 
 def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
-          progress: ProgressFn | None, end_time: float | None) -> RunResult:
+          progress: ProgressFn | None, end_time: float | None,
+          threads: int | None = None) -> RunResult:
     wall0 = time.perf_counter()
     options = model.options
-    integ = make_integrator(model)
+    integ = make_integrator(model, threads=threads)
     # on a cold kernel cache, run serially and compile the threaded kernel beside the run
     deferred = integ.defer_threads()
     if not is_compiled(integ.variant()):
