@@ -19,9 +19,10 @@ from emfabric._kernels.shapes import (
     contact_margin,
     pressing_point,
     surface_point,
+    thinnest_radius,
 )
 from emfabric._kernels.sums import fsum
-from emfabric._kernels.vec3 import cross
+from emfabric._kernels.vec3 import cross, norm
 
 STICK, SLIDE = 2, 3
 """work.flag of a node in contact at the latest iterate: sticking, sliding (0: no candidate,
@@ -404,3 +405,23 @@ def reaction_sums(nc, c_imp, c_arm, buf, imp_force, imp_moment):
         for k in range(nc):
             buf[k] = -(c_arm[a, k] * c_imp[b, k] - c_arm[b, k] * c_imp[a, k])
         imp_moment[c] = fsum(buf, nc)
+
+
+CONTACT_TRAVEL = 0.25
+"""The largest fraction of the body's radius it may move relative to the fabric in one step:
+the no-tunnelling limit of the step (a thin, fast body cannot pass a yarn between two steps)."""
+
+
+@njit(cache=True)
+def travel_step(phys, x, v, b_state):
+    """The no-tunnelling limit [s]: the body moves at most CONTACT_TRAVEL of its radius relative
+    to any node in one step (inf without a body or motion)."""
+    body = phys.body
+    if not body.active:
+        return math.inf
+    vmax = 0.0
+    for n in range(x.shape[1]):
+        vmax = max(vmax, v[0, n] ** 2 + v[1, n] ** 2 + v[2, n] ** 2)
+    speed = (norm(b_state[BODY_V]) + bounding_radius(body) * norm(b_state[BODY_W])
+             + math.sqrt(vmax))
+    return CONTACT_TRAVEL * thinnest_radius(body) / speed if speed > 0.0 else math.inf

@@ -73,7 +73,6 @@ from emfabric._kernels.shapes import (
     contact_margin,
     nodes_inside,
     surface_point,
-    thinnest_radius,
 )
 from emfabric._kernels.vec3 import (
     copy_into,
@@ -90,11 +89,6 @@ from emfabric._kernels.vec3 import (
 
 OK, NOT_FINITE, CONTACT_MISSED, BODY_NOT_CONVERGED = 0, 2, 3, 4
 """Status of a step (the φ kernel's codes where they mean the same)."""
-
-CONTACT_TRAVEL = 0.25
-"""The largest fraction of the body's radius it may move relative to the fabric in one step:
-the no-tunnelling limit of the step (a thin, fast body cannot pass a yarn between two steps)."""
-
 
 @njit(cache=True, inline="always")
 def rotate(v, q_over_m, b, h):
@@ -138,21 +132,6 @@ def stable_step(phys, x, alpha, scratch):
         if nodes.inv_mass[n] > 0.0:
             worst = max(worst, 2.0 * scratch[n] * nodes.inv_mass[n])
     return 2.0 / math.sqrt(worst) if worst > 0.0 else math.inf
-
-
-@njit(cache=True)
-def travel_step(phys, x, v, b_state):
-    """The no-tunnelling limit [s]: the body moves at most CONTACT_TRAVEL of its radius relative
-    to any node in one step (inf without a body or motion)."""
-    body = phys.body
-    if not body.active:
-        return math.inf
-    vmax = 0.0
-    for n in range(x.shape[1]):
-        vmax = max(vmax, v[0, n] ** 2 + v[1, n] ** 2 + v[2, n] ** 2)
-    speed = (norm(b_state[BODY_V]) + bounding_radius(body) * norm(b_state[BODY_W])
-             + math.sqrt(vmax))
-    return CONTACT_TRAVEL * thinnest_radius(body) / speed if speed > 0.0 else math.inf
 
 
 @njit(cache=True, inline="always")

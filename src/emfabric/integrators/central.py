@@ -15,6 +15,7 @@ import math
 import numba
 import numpy as np
 
+from emfabric._kernels.contact import travel_step
 from emfabric._kernels.explicit import (
     BODY_NOT_CONVERGED,
     CONTACT_MISSED,
@@ -22,7 +23,6 @@ from emfabric._kernels.explicit import (
     OK,
     central_step,
     stable_step,
-    travel_step,
 )
 from emfabric._kernels.nodes import ROWBUF_ROWS, ROWS_PER_BLOCK
 from emfabric._kernels.records import make_work

@@ -13,6 +13,7 @@ import numba
 import numpy as np
 
 from emfabric._kernels import is_compiled, mark_compiled
+from emfabric._kernels.contact import travel_step
 from emfabric._kernels.energy import step_energy
 from emfabric._kernels.nodes import ROWBUF_ROWS, ROWS_PER_BLOCK
 from emfabric._kernels.records import Solver, make_work
@@ -80,6 +81,7 @@ class Integrator(IntegratorBase):
         # the step and energy kernels without the per-call type dispatch (fastcall)
         self._attempt = Direct(attempt_step)
         self._energy = Direct(step_energy)
+        self._travel = Direct(travel_step)
 
     def _use_threads(self, on: bool) -> None:
         """Pick the serial or the threaded node kernel (the same numbers, bit for bit).
@@ -158,7 +160,10 @@ class Integrator(IntegratorBase):
             if self._background_ok:
                 mark_compiled(self.variant(True))
                 self._use_threads(True)
-        dt = min(s_in.dt, dt_limit)
+        # no tunnelling: the body moves at most contact.CONTACT_TRAVEL of its radius relative
+        # to the fabric per step (far above the controller's step in the paper's scenarios)
+        travel = self._travel(None, self.physics, s_in.node_x, s_in.node_v, s_in.body)
+        dt = min(s_in.dt, dt_limit, travel)
         tol, k_d = self.solver.tolerance, self.solver.iteration_limit
         rejected = 0
         evaluations = 0
