@@ -6,6 +6,7 @@ cannot go on (``DivergenceError``). A scheme (phi.py, central.py) subclasses Int
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
 import numpy as np
@@ -42,7 +43,7 @@ class StepInfo:
     """Nodes in contact at t + Δt."""
 
 
-class IntegratorBase:
+class IntegratorBase(ABC):
     """One time-integration scheme for one Model: ``step(s_in, s_out, dt_limit=…)`` advances
     s_in by one accepted step into s_out (s_in is never written) and returns a StepInfo; a
     State holds everything a scheme needs to continue (so a checkpoint is a State).
@@ -58,8 +59,9 @@ class IntegratorBase:
         self.model = model
         self.physics = model.physics
 
+    @abstractmethod
     def step(self, s_in: State, s_out: State, *, dt_limit: float = math.inf) -> StepInfo:
-        raise NotImplementedError
+        """Advance s_in by one accepted step into s_out (s_in untouched), at most dt_limit."""
 
     def variant(self, threaded: bool | None = None) -> str:
         """Name of the compiled step kernels this integrator runs."""
@@ -69,14 +71,14 @@ class IntegratorBase:
         """Run serially until a threaded kernel is compiled (default: nothing deferred)."""
         return False
 
-    def start_background_compile(self, s_in: State, s_out: State) -> None:
+    def start_background_compile(self, s_in: State, s_out: State) -> None:  # noqa: B027
         """Compile a deferred threaded kernel beside the run (default: none)."""
 
     @property
     def compiling_in_background(self) -> bool:
         return False
 
-    def finish_background_compile(self) -> None:
+    def finish_background_compile(self) -> None:  # noqa: B027
         """Wait for a background compile still running (default: none)."""
 
     def fail(self, s_in: State, dt: float, why: str) -> None:
