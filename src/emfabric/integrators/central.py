@@ -78,8 +78,10 @@ class CentralDifference(IntegratorBase):
         return min(self.courant * crit, travel, self.dt_max)
 
     def step(self, s_in: State, s_out: State, *, dt_limit: float = math.inf) -> StepInfo:
-        """Advance s_in by one step into s_out; s_in is left untouched."""
-        dt = min(self.stable_dt(s_in), dt_limit)
+        """Advance s_in by one step into s_out; s_in is left untouched. The step is the one the
+        previous step computed for this state (State.dt; also in a checkpoint), or computed here
+        for the initial state."""
+        dt = min(s_in.dt if s_in.steps > 0 else self.stable_dt(s_in), dt_limit)
         rejected = 0
         s_out.energy[:] = s_in.energy
         while True:
