@@ -1,7 +1,7 @@
 """Central differences: one explicit step, one force evaluation (kick, rotate, drift, contact,
 force, rotate, kick).
 
-With h = Δt, f the non-magnetic node force (yarns + electric + gravity, nodes.node_forces) and
+With h = Δt, f the non-magnetic node force (yarns + electric + gravity, nodes._row_force) and
 the magnetic force time-centred as two exact rotations of half a step each (Boris's two-step
 rotation with the angle |q B/m|·h/2 exactly: the cyclotron frequency is exact and |v| is kept):
 
@@ -44,16 +44,18 @@ from emfabric._kernels.contact import (
 )
 from emfabric._kernels.energy import damage_release, impulse_dissipation
 from emfabric._kernels.fields import (
-    electric_at_nodes,
     field_at,
     fill_node_fields,
     has_electric_field,
-    magnetic_force,
-    node_field,
     with_sources,
 )
 from emfabric._kernels.materials import damage_thresholds, stretch_sq, tangent_factor
-from emfabric._kernels.nodes import node_forces, node_forces_threads
+from emfabric._kernels.nodes import (
+    drift_rows,
+    drift_rows_threads,
+    kick_rows,
+    kick_rows_threads,
+)
 from emfabric._kernels.records import (
     BODY_F,
     BODY_M,
@@ -67,6 +69,11 @@ from emfabric._kernels.records import (
     ENERGY_PROJECTION,
     ENERGY_WORK_FIELD,
     ENERGY_WORK_GRAVITY,
+    SUM_PROJECTION,
+    SUM_SPEED,
+    SUM_STIFFNESS,
+    SUM_WORK_FIELD,
+    SUM_WORK_GRAVITY,
 )
 from emfabric._kernels.shapes import (
     bounding_radius,
@@ -90,24 +97,13 @@ from emfabric._kernels.vec3 import (
 OK, NOT_FINITE, CONTACT_MISSED, BODY_NOT_CONVERGED = 0, 2, 3, 4
 """Status of a step (the φ kernel's codes where they mean the same)."""
 
-@njit(cache=True, inline="always")
-def rotate(v, q_over_m, b, h):
-    """v after a time h of dv/dt = (q/m) v × B at constant B: the rotation about Ω = −(q/m) B by
-    the angle |Ω| h (Rodrigues). The same map as Boris's two-step rotation with t = tan(θ/2)
-    along Ω̂ — the standard t = qBh/(2m) turns by 2 atan(|t|) < θ; this one is exact at any
-    angle, and keeps |v|."""
-    bb = math.sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2])
-    theta = abs(q_over_m) * bb * h
-    if theta == 0.0:
-        return v
-    s = -1.0 / bb if q_over_m > 0.0 else 1.0 / bb
-    kx, ky, kz = s * b[0], s * b[1], s * b[2]
-    cs = math.cos(theta)
-    sn = math.sin(theta)
-    kv = (kx * v[0] + ky * v[1] + kz * v[2]) * (1.0 - cs)
-    return (v[0] * cs + (ky * v[2] - kz * v[1]) * sn + kx * kv,
-            v[1] * cs + (kz * v[0] - kx * v[2]) * sn + ky * kv,
-            v[2] * cs + (kx * v[1] - ky * v[0]) * sn + kz * kv)
+@njit(cache=True)
+def _sum_rows(a, ny):
+    """Σ a[:ny] in row order (a fixed order, whatever the thread count)."""
+    total = 0.0
+    for j in range(ny):
+        total += a[j]
+    return total
 
 
 @njit(cache=True)
@@ -159,79 +155,6 @@ def _mid_rotation(body, rot0, h_half, dt, tol, scratch, rot1):
     rotation_increment((dt * w[0], dt * w[1], dt * w[2]), inc)
     mat_mul(inc, rot0, rot1)
     return w, False
-
-
-@njit(cache=True)
-def _kick_rotate_drift(phys, sin, sout, work, t0, dt):
-    """First half of every free node: v⁻ = v + h/(2m) f, v_{n+½} = R(B(x, t0), h/2) v⁻ into
-    sout.v, x_{n+1} = x + h v_{n+½} into sout.x. Returns the field and gravity work of the half
-    kick (h/2 f·v̄ of its electric and gravity parts) [J]."""
-    nodes, fld = phys.nodes, phys.field
-    inv_mass, mass, charge = nodes.inv_mass, nodes.mass, nodes.charge
-    grav = fld.gravity
-    x0, v0, f0, e0 = sin.x, sin.v, sin.f, sin.e
-    x1, v1 = sout.x, sout.v
-    half = 0.5 * dt
-    w_field = 0.0
-    w_grav = 0.0
-    for n in range(x0.shape[1]):
-        im = inv_mass[n]
-        if im == 0.0:
-            for c in range(3):
-                x1[c, n] = x0[c, n]
-                v1[c, n] = v0[c, n]
-            continue
-        q = charge[n]
-        _e, b = node_field(fld, work.node_field, n, (x0[0, n], x0[1, n], x0[2, n]), t0)
-        # the State's force is ψ(t) with the magnetic part (as the φ-scheme's): without it
-        fm = magnetic_force(q, (v0[0, n], v0[1, n], v0[2, n]), b)
-        vm = (v0[0, n] + half * (f0[0, n] - fm[0]) * im,
-              v0[1, n] + half * (f0[1, n] - fm[1]) * im,
-              v0[2, n] + half * (f0[2, n] - fm[2]) * im)
-        for c in range(3):
-            vbar = 0.5 * (v0[c, n] + vm[c])
-            w_field += half * q * e0[c, n] * vbar
-            w_grav += half * mass[n] * grav[c] * vbar
-        vh = rotate(vm, q * im, b, half)
-        for c in range(3):
-            v1[c, n] = vh[c]
-            x1[c, n] = x0[c, n] + dt * vh[c]
-    return w_field, w_grav
-
-
-@njit(cache=True)
-def _rotate_kick(phys, sout, work, t1, dt):
-    """Second half of every free node: v⁺ = R(B(x_{n+1}, t1), h/2) v_{n+½}, v_{n+1} = v⁺ +
-    h/(2m) f_{n+1}, in sout.v; then the magnetic force q v_{n+1} × B added to sout.f (the
-    State's force is the whole ψ(t), as the φ-scheme's). Returns the field and gravity work of
-    the half kick [J] and the sum of the nodes' |x| + |v| (finite unless the step blew up)."""
-    nodes, fld = phys.nodes, phys.field
-    inv_mass, mass, charge = nodes.inv_mass, nodes.mass, nodes.charge
-    grav = fld.gravity
-    x1, v1, f1, e1 = sout.x, sout.v, sout.f, sout.e
-    half = 0.5 * dt
-    w_field = 0.0
-    w_grav = 0.0
-    size = 0.0
-    for n in range(x1.shape[1]):
-        im = inv_mass[n]
-        if im == 0.0:
-            continue
-        q = charge[n]
-        size += abs(x1[0, n]) + abs(x1[1, n]) + abs(x1[2, n])
-        _e, b = node_field(fld, work.node_field, n, (x1[0, n], x1[1, n], x1[2, n]), t1)
-        vp = rotate((v1[0, n], v1[1, n], v1[2, n]), q * im, b, half)
-        for c in range(3):
-            vn = vp[c] + half * f1[c, n] * im
-            vbar = 0.5 * (vp[c] + vn)
-            w_field += half * q * e1[c, n] * vbar
-            w_grav += half * mass[n] * grav[c] * vbar
-            v1[c, n] = vn
-            size += abs(vn)
-        fm = magnetic_force(q, (v1[0, n], v1[1, n], v1[2, n]), b)
-        for c in range(3):
-            f1[c, n] += fm[c]
-    return w_field, w_grav, size
 
 
 @njit(cache=True)
@@ -330,7 +253,9 @@ def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
     ROWBUF_ROWS, nx + 1: the threaded one) is an array, the other None (only the kernel in use
     is compiled); both give the same numbers.
 
-    Returns (status, contacts): OK; NOT_FINITE (a non-finite value: Δt too large or the run
+    Returns (status, contacts, stable): stable the explicit stability limit at the new state
+    (stable_step's Gershgorin bound, from the force evaluation's tangent stiffnesses) [s];
+    status OK; NOT_FINITE (a non-finite value: Δt too large or the run
     diverged); CONTACT_MISSED (a free node ended inside the body without being a contact
     candidate); BODY_NOT_CONVERGED (the mid-step rotation did not converge)."""
     nodes, body, fld = phys.nodes, phys.body, phys.field
@@ -364,7 +289,15 @@ def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
     # nodes: the first half kick and rotation at (x_n, t), then the drift
     if with_sources(fld):
         fill_node_fields(fld, sin.x, sin.v, 0.0, t, work.node_field)
-    w_field, w_grav = _kick_rotate_drift(phys, sin, sout, work, t, dt)
+    if rowbuf is None:
+        if threads is not None:
+            drift_rows_threads(phys, sin, sout, work, t, dt, threads)
+    else:
+        drift_rows(phys, sin, sout, work, t, dt, rowbuf)
+    sums = work.row_sums
+    ny = nodes.ny
+    w_field = _sum_rows(sums[SUM_WORK_FIELD], ny)
+    w_grav = _sum_rows(sums[SUM_WORK_GRAVITY], ny)
     for n in range(sout.contact.shape[1]):
         for c in range(4):
             sout.contact[c, n] = 0.0
@@ -391,7 +324,7 @@ def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
             b_out[BODY_X, c] = b_in[BODY_X, c] + dt * v_half
         _w_mid, ok = _mid_rotation(body, rot0, h_half, dt, tol, scratch, rot1)
         if not ok:
-            return BODY_NOT_CONVERGED, 0
+            return BODY_NOT_CONVERGED, 0, math.inf
         # the angular velocity at the new rotation before contact: the surface's velocity
         w_pre = _spin_solve(rot1, body, h_half, scratch)
         for c in range(3):
@@ -406,15 +339,6 @@ def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
             nc = segment_contact(nodes, phys.yarns, body, phys.contact, b_out, nseg, nc,
                                  sout.x, sout.v, work)
         reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, reaction[0], reaction[1])
-    # the forces at the new positions and time: the one force evaluation of the step
-    if with_sources(fld):
-        fill_node_fields(fld, sout.x, sout.v, 0.0, t1, work.node_field)
-    if rowbuf is None:
-        if threads is not None:
-            node_forces_threads(phys, sout.x, sin, sout, work, t1, threads)
-    else:
-        node_forces(phys, sout.x, sin, sout, work, t1, rowbuf)
-    electric_at_nodes(fld, work.node_field, sout.x, t1, sout.e)
     # energy of the contacts (velocities before and after the impulses, at the half step)
     d_cont = 0.0
     d_fric = 0.0
@@ -447,21 +371,26 @@ def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
             b_out[BODY_W, c] = w1[c]
         if has_electric_field(fld):
             w_field += _body_field_work(phys, b_in, b_out, t, t1)
+    # the forces at the new positions and time (the one force evaluation of the step), the
+    # second half rotation and kick
+    if with_sources(fld):
+        fill_node_fields(fld, sout.x, sout.v, 0.0, t1, work.node_field)
+    if rowbuf is None:
+        if threads is not None:
+            kick_rows_threads(phys, sin, sout, work, t1, dt, threads)
+    else:
+        kick_rows(phys, sin, sout, work, t1, dt, rowbuf)
+    w_field += _sum_rows(sums[SUM_WORK_FIELD], ny)
+    w_grav += _sum_rows(sums[SUM_WORK_GRAVITY], ny)
     # the work of the node force over the displacement the kicks do not see: the kicks book
     # h/2 f·v̄ with the velocity before contact in the first and after it in the second, i.e. a
     # displacement h (v⁻ + v⁺)/2, while the node moved h v⁻ and then was placed: the difference
-    # is the placement jump less h/2 of the contact's velocity change
-    d_proj = 0.0
-    for idx in range(ncand if body.active else 0):
-        n = work.cand[idx]
-        for c in range(3):
-            moved = (sout.x[c, n] - work.xbuf[c, n]
-                     - half * (sout.v[c, n] - work.v_pre[c, n]))
-            d_proj += sout.f[c, n] * moved
-    # nodes: the second half rotation and kick
-    wf2, wg2, size = _rotate_kick(phys, sout, work, t1, dt)
-    w_field += wf2
-    w_grav += wg2
+    # is the placement jump less h/2 of the contact's velocity change (nodes._kick_block)
+    d_proj = _sum_rows(sums[SUM_PROJECTION], ny)
+    size = _sum_rows(sums[SUM_SPEED], ny)
+    worst = 0.0
+    for j in range(ny):
+        worst = max(worst, sums[SUM_STIFFNESS, j])
     d_dam = damage_release(phys.yarns, phys.material, sout.x, sin.alpha, sout.alpha)
     energy[ENERGY_WORK_FIELD] += w_field
     energy[ENERGY_WORK_GRAVITY] += w_grav
@@ -472,8 +401,9 @@ def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
     total = w_field + w_grav + d_cont + d_fric + d_proj + d_dam + size
     for c in range(3):
         total += b_out[BODY_V, c] + b_out[BODY_W, c]
+    stable = 2.0 / math.sqrt(worst) if worst > 0.0 else math.inf
     if not math.isfinite(total):
-        return NOT_FINITE, nc
+        return NOT_FINITE, nc, stable
     if body.active and nodes_inside(sout.x, inv_mass, flag, body, b_out) > 0:
-        return CONTACT_MISSED, nc
-    return OK, nc
+        return CONTACT_MISSED, nc, stable
+    return OK, nc, stable

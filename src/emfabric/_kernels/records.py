@@ -323,13 +323,32 @@ class StateArrays(NamedTuple):
     contact.SLIDE)."""
 
 
+# rows of Work.row_sums, one value per grid row, summed in a fixed order by the step kernels
+SUM_ERROR_NUM = 0
+"""φ-scheme: Σ |x_K − x_{K−1}| of the row's nodes out of contact (eq. 3.10)."""
+SUM_ERROR_DEN = 1
+"""φ-scheme: Σ |x_K − x_n|."""
+SUM_WORK_FIELD = 2
+"""Central differences: the electric field's work of a half kick [J]."""
+SUM_WORK_GRAVITY = 3
+"""Central differences: gravity's work of a half kick [J]."""
+SUM_PROJECTION = 4
+"""Central differences: the force's work over the contact placement [J]."""
+SUM_SPEED = 5
+"""Central differences: Σ |v|² [m²/s²] (finite unless the step blew up)."""
+SUM_STIFFNESS = 6
+"""Central differences: the largest 2 Σ k_t/m of the row's nodes [s⁻²] (Gershgorin)."""
+SUM_ROWS = 7
+
+
 class Work(NamedTuple):
     """Scratch arrays of one attempted step."""
 
     xbuf: np.ndarray
     """Second iterate buffer, (3, node_count)."""
-    err_rows: np.ndarray
-    """Per-row error sums, (2, ny)."""
+    row_sums: np.ndarray
+    """Per-row sums of the node kernels, (SUM_ROWS, ny): rows SUM_* (the φ-scheme's error terms,
+    central differences' work, projection, speed and stiffness bound)."""
     err_num: np.ndarray
     err_den: np.ndarray
     cand: np.ndarray
@@ -391,7 +410,7 @@ def make_work(nx: int, ny: int, seg_count: int = 0) -> Work:
     n = nx * ny
     nmax = n + seg_count
     ns = n if seg_count else 1
-    return Work(np.empty((3, n)), np.empty((2, ny)), np.empty(n), np.empty(n),
+    return Work(np.empty((3, n)), np.empty((SUM_ROWS, ny)), np.empty(n), np.empty(n),
                 np.empty(n, dtype=np.int64), np.zeros(n, dtype=np.uint8),
                 np.empty(max(seg_count, 1), dtype=np.int64),
                 np.zeros(max(seg_count, 1), dtype=np.int8),

@@ -87,7 +87,7 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
     t1 = t + dt
     x0, v0, b_in = sin.x, sin.v, sin.body
     x1, v1, f1, alpha_t, b_out = sout.x, sout.v, sout.f, sout.alpha, sout.body
-    xbuf, flag, err_rows = work.xbuf, work.flag, work.err_rows
+    xbuf, flag, err_rows = work.xbuf, work.flag, work.row_sums
 
     # one pass over the start state: the fastest node (contact reach) and the size of the
     # coordinates (a displacement below their round-off is no motion: ϖ would be noise/noise)

@@ -71,9 +71,12 @@ class CentralDifference(IntegratorBase):
         threaded = self.threaded if threaded is None else threaded
         return f"central-difference-{'threads' if threaded else 'serial'}"
 
-    def stable_dt(self, state: State) -> float:
-        """The step central differences take from this state [s] (before dt_limit)."""
-        crit = self._stable(None, self.physics, state.node_x, state.seg_alpha, self.scratch)
+    def stable_dt(self, state: State, crit: float | None = None) -> float:
+        """The step central differences take from this state [s] (before dt_limit); crit: the
+        stability limit if known (the step kernel computes it at its end state), else
+        explicit.stable_step."""
+        if crit is None:
+            crit = self._stable(None, self.physics, state.node_x, state.seg_alpha, self.scratch)
         travel = self._travel(None, self.physics, state.node_x, state.node_v, state.body)
         return min(self.courant * crit, travel, self.dt_max)
 
@@ -85,7 +88,7 @@ class CentralDifference(IntegratorBase):
         rejected = 0
         s_out.energy[:] = s_in.energy
         while True:
-            status, nc = self._step(self.threaded, self.physics, s_in.arrays, s_out.arrays,
+            status, nc, crit = self._step(self.threaded, self.physics, s_in.arrays, s_out.arrays,
                                     self.work, self.rowbuf, self.threads, s_in.t, dt,
                                     ROTATION_TOLERANCE, s_out.energy)
             if status == OK:
@@ -113,7 +116,7 @@ class CentralDifference(IntegratorBase):
         s_out.contact_count = nc
         s_out.contact_steps = s_in.contact_steps + (1 if nc > 0 else 0)
         s_out.contact_force[:] = self.work.reaction[0] / dt
-        s_out.dt = self.stable_dt(s_out)
+        s_out.dt = self.stable_dt(s_out, crit)
         return StepInfo(t=s_out.t, dt=dt, iterations=1, error=0.0, rejected=rejected,
                         evaluations=1 + rejected, contacts=nc)
 
