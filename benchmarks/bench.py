@@ -176,7 +176,7 @@ def iterate_args(integ, s, s2, dt: float) -> tuple:
     work.xbuf[:] = s.node_x
     # as an attempt does: where the damage law can change α (the kernel skips it elsewhere)
     damage_thresholds(s.seg_alpha, integ.physics.material, work.damage_thr, work.damage_alpha)
-    return (integ.physics, work.xbuf, s.arrays, s2.arrays, work, integ.rowbuf, integ.threads,
+    return (integ.physics, work.xbuf, s.arrays, s2.arrays, work, *integ.kernel_buffers,
             s.t + dt, integ.solver.phi, dt)
 
 

@@ -191,6 +191,37 @@ def test_threaded_force_kernel_gives_identical_results():
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
 
 
+def test_adaptive_threads_switch_kernels_without_changing_the_run(monkeypatch):
+    """With the thread count chosen at run time, the integrator probes the other node kernel
+    every PROBE_EVERY steps and keeps the faster: the run uses both and is the serial run bit
+    for bit; fed timings where threads lose, it ends on the serial kernel, and the reverse."""
+    from emfabric.integrators import base
+
+    monkeypatch.setattr(base, "PROBE_EVERY", 6)
+    monkeypatch.setattr(base, "PROBE_STEPS", 2)
+    sc = load_scenario("demo-small", {"fabric.nodes": [24, 24], "solver.end_time": 8e-6,
+                                      "projectile.gap": 0.0, **CD})
+    model = build_model(sc)
+    states, used = [], set()
+    for adaptive in (False, True):
+        integ = CentralDifference(model, threads=adaptive, adaptive=adaptive)
+        s, s2 = initial_state(model), initial_state(model)
+        while s.t < 8e-6:
+            integ.step(s, s2)
+            used.add(integ.threaded)
+            s, s2 = s2, s
+        states.append(s)
+    assert used == {False, True}
+    a, b = states
+    for name in ("node_x", "node_v", "seg_alpha", "body", "energy"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    for slow_threads in (True, False):
+        integ = CentralDifference(model, threads=True, adaptive=True)
+        for _ in range(60):
+            integ._after_step(2.0 if integ.threaded == slow_threads else 1.0)
+        assert integ.threaded is not slow_threads
+
+
 def test_energy_balance_error_is_second_order():
     """The kicks and impulses book exactly the kinetic energy they change; what is left of the
     balance (the yarns' trapezoidal work) is the scheme's own error: 4× smaller per halving of

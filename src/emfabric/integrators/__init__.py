@@ -24,7 +24,8 @@ def default_threads(model) -> int:
     THREADS_FROM_NODES nodes (issue 22 measured the two-thread kernel on the paper's 100 × 100
     sheet 6 % faster on the idle 2-core machine and 2× slower with three busy processes beside
     it: every iterate ends at a barrier that waits for a descheduled thread), else every core
-    Numba has."""
+    Numba has — and then the integrator keeps checking, by timing, that the threaded kernels
+    are faster than the serial ones (adaptive threads, IntegratorBase)."""
     import numba
 
     return numba.config.NUMBA_NUM_THREADS if model.node_count >= THREADS_FROM_NODES else 1
@@ -39,9 +40,11 @@ def make_integrator(model, *, threads: int | None = None) -> IntegratorBase:
     count = min(count, numba.config.NUMBA_NUM_THREADS)
     if count > 1:
         numba.set_num_threads(count)
+    # threads chosen for the user are checked against the serial kernel as the run goes
+    adaptive = threads is None and count > 1
     if model.options.integrator == "central-difference":
-        return CentralDifference(model, threads=count > 1)
-    return Integrator(model, threads=count > 1)
+        return CentralDifference(model, threads=count > 1, adaptive=adaptive)
+    return Integrator(model, threads=count > 1, adaptive=adaptive)
 
 
 __all__ = ["CentralDifference", "DivergenceError", "Integrator", "IntegratorBase", "StepInfo",

@@ -6,11 +6,17 @@ cannot go on (``DivergenceError``). A scheme (phi.py, central.py) subclasses Int
 from __future__ import annotations
 
 import math
+import statistics
+import threading
+import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
+from emfabric._kernels import is_compiled, mark_compiled
+from emfabric._kernels.nodes import ROWBUF_ROWS, ROWS_PER_BLOCK
 from emfabric.sim.model import Model
 from emfabric.sim.state import State
 
@@ -43,43 +49,169 @@ class StepInfo:
     """Nodes in contact at t + Δt."""
 
 
+PROBE_EVERY = 1000
+"""Steps between two probes of the other node kernel (serial against threaded) when the thread
+count is chosen at run time (IntegratorBase, adaptive threads)."""
+PROBE_STEPS = 12
+"""Steps timed per probe (the first step of a probe window is not counted)."""
+
+
 class IntegratorBase(ABC):
     """One time-integration scheme for one Model: ``step(s_in, s_out, dt_limit=…)`` advances
     s_in by one accepted step into s_out (s_in is never written) and returns a StepInfo; a
     State holds everything a scheme needs to continue (so a checkpoint is a State).
 
-    Compile handling, for the runner: ``variant()`` names the compiled kernels in use (the
-    kernel cache marks them compiled after the first step); a scheme that compiles its threaded
-    kernel beside the run overrides ``defer_threads`` and the background-compile methods (the
-    defaults do nothing)."""
+    Node kernels, for both schemes: a serial one (row buffer ``rowbuf``) and a threaded one
+    over row blocks (``threads``, one buffer per block); the other is None, so only the kernel
+    in use is compiled. They give the same numbers to the bit, so switching never changes a
+    run. ``variant()`` names the compiled kernels in use (the kernel cache marks them compiled
+    after the first step). On a cold cache the threaded kernel is compiled beside the run
+    (``defer_threads``, ``start_background_compile``: the subclass gives the kernel and its
+    arguments, ``_compile_target``).
+
+    Adaptive threads (``adaptive=True``, the default where threads may pay off): the scheme
+    times its steps, and every PROBE_EVERY steps runs PROBE_STEPS with the other kernel; it
+    keeps whichever was faster. On a loaded machine the threaded kernel waits at each barrier
+    for a descheduled thread and the serial one wins; idle, the threaded one wins on large
+    sheets. A subclass calls ``_before_step()`` first and ``_after_step(seconds)`` with the
+    kernel's wall time last in ``step``."""
 
     name = "base"
 
-    def __init__(self, model: Model):
+    def __init__(self, model: Model, *, threads: bool = False, adaptive: bool = False):
         self.model = model
         self.physics = model.physics
+        self._deferred = False  # serial until the threaded kernel is compiled
+        self._background: threading.Thread | None = None
+        self._background_ok = False
+        self.adaptive_threads = bool(adaptive and threads)
+        self._steps_timed = 0
+        self._probe_left = 0
+        self._recent: dict[bool, list[float]] = {False: [], True: []}
+        self.rowbuf: np.ndarray | None = None
+        """The serial kernel's row buffer (None until it is used)."""
+        self.threads: np.ndarray | None = None
+        """The threaded kernel's row buffers, one per row block (None until it is used)."""
+        self._use_threads(threads)
 
     @abstractmethod
     def step(self, s_in: State, s_out: State, *, dt_limit: float = math.inf) -> StepInfo:
         """Advance s_in by one accepted step into s_out (s_in untouched), at most dt_limit."""
 
     def variant(self, threaded: bool | None = None) -> str:
-        """Name of the compiled step kernels this integrator runs."""
+        """Name of the compiled step kernels this integrator runs (or would run threaded)."""
         return self.name
 
-    def defer_threads(self) -> bool:
-        """Run serially until a threaded kernel is compiled (default: nothing deferred)."""
-        return False
+    def _compile_target(self, s_in: State, s_out: State, threads: np.ndarray):
+        """(dispatcher, arguments) of the threaded step kernel, for its background compile
+        (None: nothing to compile beside the run)."""
+        return None
 
-    def start_background_compile(self, s_in: State, s_out: State) -> None:  # noqa: B027
-        """Compile a deferred threaded kernel beside the run (default: none)."""
+    # --- the node kernel in use -----------------------------------------------------------
+
+    def _use_threads(self, on: bool) -> None:
+        """Pick the serial or the threaded node kernel (the same numbers, bit for bit)."""
+        m = self.model
+        self.threaded = bool(on)
+        if on and self.threads is None:
+            self.threads = np.empty((-(-m.ny // ROWS_PER_BLOCK), ROWBUF_ROWS, m.nx + 1))
+        if not on and self.rowbuf is None:
+            self.rowbuf = np.empty((ROWBUF_ROWS, m.nx + 1))
+        self._kernel_buffers = ((None, self.threads) if on else (self.rowbuf, None))
+
+    @property
+    def kernel_buffers(self) -> tuple:
+        """(rowbuf, threads) for the step kernel: exactly one is an array."""
+        return self._kernel_buffers
+
+    def _before_step(self) -> None:
+        """Switch to the threaded kernel once its background compile has finished."""
+        bg = self._background
+        if bg is not None and not bg.is_alive():
+            # one try: on failure the serial kernel simply stays in use
+            self._background = None
+            self._deferred = False
+            if self._background_ok:
+                mark_compiled(self.variant(True))
+                self._use_threads(True)
+                self._steps_timed = 0
+
+    def _after_step(self, seconds: float) -> None:
+        """Adaptive threads: time the step just taken; probe the other kernel every
+        PROBE_EVERY steps and keep the faster."""
+        if not self.adaptive_threads or self._deferred:
+            return
+        self._steps_timed += 1
+        if self._probe_left > 0:
+            self._probe_left -= 1
+            if self._probe_left < PROBE_STEPS:  # the window's first step may compile
+                self._recent[self.threaded].append(seconds)
+            if self._probe_left == 0:
+                mine = statistics.median(self._recent[self.threaded])
+                theirs = statistics.median(self._recent[not self.threaded] or [math.inf])
+                if theirs < mine:
+                    self._use_threads(not self.threaded)
+                self._recent = {False: [], True: []}
+            return
+        recent = self._recent[self.threaded]
+        recent.append(seconds)
+        del recent[:-PROBE_STEPS]
+        if self._steps_timed % PROBE_EVERY == PROBE_EVERY // 2 and len(recent) == PROBE_STEPS:
+            self._use_threads(not self.threaded)
+            self._probe_left = PROBE_STEPS + 1
+
+    @staticmethod
+    def clock() -> float:
+        return time.perf_counter()
+
+    # --- compiling the threaded kernel beside the run --------------------------------------
+
+    def defer_threads(self) -> bool:
+        """Run serially until the threaded kernel is compiled, if it is not cached yet.
+
+        Returns whether it deferred; start_background_compile() then compiles the threaded
+        kernel beside the run, and the next step after it is ready switches to it. Serial and
+        threaded kernels give identical results, so the switch does not change the run."""
+        if not self.threaded or is_compiled(self.variant(True)):
+            return False
+        self._use_threads(False)
+        self._deferred = True
+        return True
+
+    def start_background_compile(self, s_in: State, s_out: State) -> None:
+        """Compile the threaded step kernel in a background thread (after defer_threads)."""
+        if not self._deferred or self._background is not None:
+            return
+        m = self.model
+        target = self._compile_target(
+            s_in, s_out, np.empty((-(-m.ny // ROWS_PER_BLOCK), ROWBUF_ROWS, m.nx + 1)))
+        if target is None:
+            return
+        kernel, args = target
+        sig = tuple(numba.typeof(a) for a in args)
+
+        def compile_threaded() -> None:
+            try:
+                kernel.compile(sig)
+                self._background_ok = True
+            except Exception:  # noqa: BLE001 - the serial kernel simply stays in use
+                self._background_ok = False
+
+        self._background = threading.Thread(target=compile_threaded, name="emfabric-compile",
+                                            daemon=True)
+        self._background.start()
 
     @property
     def compiling_in_background(self) -> bool:
-        return False
+        return self._background is not None and self._background.is_alive()
 
-    def finish_background_compile(self) -> None:  # noqa: B027
-        """Wait for a background compile still running (default: none)."""
+    def finish_background_compile(self) -> None:
+        """Wait for a background compile still running (a daemon thread: a process that exits
+        without waiting abandons it, and the next run compiles again)."""
+        if self._background is not None:
+            self._background.join()
+            if self._background_ok:
+                mark_compiled(self.variant(True))
 
     def fail(self, s_in: State, dt: float, why: str) -> None:
         """Raise the DivergenceError of a step from s_in at Δt: when, why, and the node with the

@@ -24,7 +24,6 @@ from emfabric._kernels.explicit import (
     central_step,
     stable_step,
 )
-from emfabric._kernels.nodes import ROWBUF_ROWS, ROWS_PER_BLOCK
 from emfabric._kernels.records import make_work
 from emfabric.integrators.base import IntegratorBase, StepInfo
 from emfabric.sim.fastcall import Direct
@@ -42,26 +41,23 @@ class CentralDifference(IntegratorBase):
 
     name = "central-difference"
 
-    def __init__(self, model: Model, *, threads: bool | None = None):
-        """threads: use the row-block threaded force kernel (default: as the φ-scheme, for
+    def __init__(self, model: Model, *, threads: bool | None = None, adaptive: bool = False):
+        """threads: use the row-block threaded node kernels (default: as the φ-scheme, for
         sheets of at least phi.THREADS_FROM_NODES nodes when Numba has more than one thread);
-        the numbers are the same either way."""
+        the numbers are the same either way. adaptive: choose between them and the serial
+        kernels by timing both (IntegratorBase)."""
         from emfabric.integrators.phi import THREADS_FROM_NODES
 
-        super().__init__(model)
         if threads is None:
             threads = (model.node_count >= THREADS_FROM_NODES
                        and numba.config.NUMBA_NUM_THREADS > 1)
-        self.threaded = threads
+        super().__init__(model, threads=threads, adaptive=adaptive)
         opts = model.options
         self.courant = opts.courant
         self.dt_max = opts.dt_max
         self.dt_min = opts.dt_min
         self.work = make_work(model.nx, model.ny,
                               model.seg_count if model.physics.contact.segments else 0)
-        self.rowbuf = None if threads else np.empty((ROWBUF_ROWS, model.nx + 1))
-        self.threads = (np.empty((-(-model.ny // ROWS_PER_BLOCK), ROWBUF_ROWS, model.nx + 1))
-                        if threads else None)
         self.scratch = np.empty(model.node_count)
         self._step = Direct(central_step)
         self._stable = Direct(stable_step)
@@ -70,6 +66,10 @@ class CentralDifference(IntegratorBase):
     def variant(self, threaded: bool | None = None) -> str:
         threaded = self.threaded if threaded is None else threaded
         return f"central-difference-{'threads' if threaded else 'serial'}"
+
+    def _compile_target(self, s_in: State, s_out: State, threads: np.ndarray):
+        return central_step, (self.physics, s_in.arrays, s_out.arrays, self.work, None, threads,
+                              s_in.t, 1e-9, ROTATION_TOLERANCE, s_out.energy)
 
     def stable_dt(self, state: State, crit: float | None = None) -> float:
         """The step central differences take from this state [s] (before dt_limit); crit: the
@@ -84,13 +84,15 @@ class CentralDifference(IntegratorBase):
         """Advance s_in by one step into s_out; s_in is left untouched. The step is the one the
         previous step computed for this state (State.dt; also in a checkpoint), or computed here
         for the initial state."""
+        self._before_step()
+        clock = self.clock()
         dt = min(s_in.dt if s_in.steps > 0 else self.stable_dt(s_in), dt_limit)
         rejected = 0
         s_out.energy[:] = s_in.energy
         while True:
-            status, nc, crit = self._step(self.threaded, self.physics, s_in.arrays, s_out.arrays,
-                                    self.work, self.rowbuf, self.threads, s_in.t, dt,
-                                    ROTATION_TOLERANCE, s_out.energy)
+            status, nc, crit = self._step(self.threaded, self.physics, s_in.arrays,
+                                          s_out.arrays, self.work, *self.kernel_buffers,
+                                          s_in.t, dt, ROTATION_TOLERANCE, s_out.energy)
             if status == OK:
                 break
             if status == NOT_FINITE:
@@ -117,6 +119,7 @@ class CentralDifference(IntegratorBase):
         s_out.contact_steps = s_in.contact_steps + (1 if nc > 0 else 0)
         s_out.contact_force[:] = self.work.reaction[0] / dt
         s_out.dt = self.stable_dt(s_out, crit)
+        self._after_step(self.clock() - clock)
         return StepInfo(t=s_out.t, dt=dt, iterations=1, error=0.0, rejected=rejected,
                         evaluations=1 + rejected, contacts=nc)
 

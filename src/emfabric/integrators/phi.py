@@ -7,15 +7,12 @@ and on failure shrinks Δt by the controller (3.9) and restarts from t (s_in is 
 from __future__ import annotations
 
 import math
-import threading
 
 import numba
 import numpy as np
 
-from emfabric._kernels import is_compiled, mark_compiled
 from emfabric._kernels.contact import travel_step
 from emfabric._kernels.energy import step_energy
-from emfabric._kernels.nodes import ROWBUF_ROWS, ROWS_PER_BLOCK
 from emfabric._kernels.records import Solver, make_work
 from emfabric._kernels.step import (
     BODY_NOT_CONVERGED,
@@ -49,17 +46,14 @@ class Integrator(IntegratorBase):
 
     name = "phi"
 
-    def __init__(self, model: Model, *, threads: bool | None = None):
+    def __init__(self, model: Model, *, threads: bool | None = None, adaptive: bool = False):
         """threads: use the row-block threaded kernel (default: for sheets of at least
-        THREADS_FROM_NODES nodes when Numba has more than one thread)."""
-        super().__init__(model)
+        THREADS_FROM_NODES nodes when Numba has more than one thread); adaptive: choose
+        between it and the serial kernel by timing both (IntegratorBase)."""
         n = model.node_count
         # threads pay off on large sheets only; block size fixed, so results never depend on them
-        self._use_threads(threads if threads is not None else (
-            n >= THREADS_FROM_NODES and numba.config.NUMBA_NUM_THREADS > 1))
-        self._deferred = False  # serial until the threaded kernel is compiled
-        self._background: threading.Thread | None = None
-        self._background_ok = False
+        super().__init__(model, threads=threads if threads is not None else (
+            n >= THREADS_FROM_NODES and numba.config.NUMBA_NUM_THREADS > 1), adaptive=adaptive)
         self.work = make_work(model.nx, model.ny,
                               model.seg_count if model.physics.contact.segments else 0)
         solver = model.options
@@ -83,68 +77,14 @@ class Integrator(IntegratorBase):
         self._energy = Direct(step_energy)
         self._travel = Direct(travel_step)
 
-    def _use_threads(self, on: bool) -> None:
-        """Pick the serial or the threaded node kernel (the same numbers, bit for bit).
-
-        The row buffers are one block for the serial kernel or one per row block for the
-        threaded one; the other is None, so that only the kernel in use is compiled."""
-        m = self.model
-        self.threaded = on
-        self.rowbuf = None if on else np.empty((ROWBUF_ROWS, m.nx + 1))
-        self.threads = self._threads_buffer() if on else None
-
-    def _threads_buffer(self) -> np.ndarray:
-        """Row buffers of the threaded kernel, one per row block."""
-        m = self.model
-        return np.empty((-(-m.ny // ROWS_PER_BLOCK), ROWBUF_ROWS, m.nx + 1))
-
     def variant(self, threaded: bool | None = None) -> str:
         """Name of the compiled step kernel this integrator runs (or would run threaded)."""
         threaded = self.threaded if threaded is None else threaded
         return (f"{'threads' if threaded else 'serial'}-"
                 f"{'anderson' if self.accel is not None else 'fixed-point'}")
 
-    def defer_threads(self) -> bool:
-        """Run serially until the threaded kernel is compiled, if it is not cached yet.
-
-        Returns whether it deferred; start_background_compile() then compiles the threaded
-        kernel beside the run, and step() switches to it once it is ready. Serial and threaded
-        kernels give identical results, so the switch does not change the run."""
-        if not self.threaded or is_compiled(self.variant(True)):
-            return False
-        self._use_threads(False)
-        self._deferred = True
-        return True
-
-    def start_background_compile(self, s_in: State, s_out: State) -> None:
-        """Compile the threaded step kernel in a background thread (after defer_threads)."""
-        if not self._deferred or self._background is not None:
-            return
-        args = self._args(s_in, s_out, 0.0, None, self._threads_buffer())
-        sig = tuple(numba.typeof(a) for a in args)
-
-        def compile_threaded() -> None:
-            try:
-                attempt_step.compile(sig)
-                self._background_ok = True
-            except Exception:  # noqa: BLE001 - the serial kernel simply stays in use
-                self._background_ok = False
-
-        self._background = threading.Thread(target=compile_threaded, name="emfabric-compile",
-                                            daemon=True)
-        self._background.start()
-
-    @property
-    def compiling_in_background(self) -> bool:
-        return self._background is not None and self._background.is_alive()
-
-    def finish_background_compile(self) -> None:
-        """Wait for a background compile still running (a daemon thread: a process that exits
-        without waiting abandons it, and the next run compiles again)."""
-        if self._background is not None:
-            self._background.join()
-            if self._background_ok:
-                mark_compiled(self.variant(True))
+    def _compile_target(self, s_in: State, s_out: State, threads: np.ndarray):
+        return attempt_step, self._args(s_in, s_out, 0.0, None, threads)
 
     def _args(self, s_in: State, s_out: State, dt: float, rowbuf, threads) -> tuple:
         return (self.physics, self.solver, s_in.arrays, s_out.arrays, self.work, rowbuf, threads,
@@ -152,14 +92,8 @@ class Integrator(IntegratorBase):
 
     def step(self, s_in: State, s_out: State, *, dt_limit: float = math.inf) -> StepInfo:
         """Advance s_in by one accepted step into s_out; s_in is left untouched."""
-        bg = self._background
-        if bg is not None and not bg.is_alive():
-            # one try: on failure the serial kernel simply stays in use
-            self._background = None
-            self._deferred = False
-            if self._background_ok:
-                mark_compiled(self.variant(True))
-                self._use_threads(True)
+        self._before_step()
+        clock = self.clock()
         # no tunnelling: the body moves at most contact.CONTACT_TRAVEL of its radius relative
         # to the fabric per step (far above the controller's step in the paper's scenarios)
         travel = self._travel(None, self.physics, s_in.node_x, s_in.node_v, s_in.body)
@@ -168,7 +102,7 @@ class Integrator(IntegratorBase):
         rejected = 0
         evaluations = 0
         while True:
-            args = self._args(s_in, s_out, dt, self.rowbuf, self.threads)
+            args = self._args(s_in, s_out, dt, *self.kernel_buffers)
             status, k, err, nc = self._attempt(self.threaded, *args)
             evaluations += k
             if status == CONVERGED:
@@ -213,6 +147,7 @@ class Integrator(IntegratorBase):
         s_out.contact_count = nc
         s_out.contact_steps = s_in.contact_steps + (1 if nc > 0 else 0)
         s_out.contact_force[:] = self.work.reaction[0] / dt
+        self._after_step(self.clock() - clock)
         return StepInfo(t=s_out.t, dt=dt, iterations=k, error=err, rejected=rejected,
                         evaluations=evaluations, contacts=nc)
 
