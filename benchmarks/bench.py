@@ -195,6 +195,19 @@ def _compiled_repeat():
     return repeat
 
 
+@functools.cache
+def _cd_repeat(kernel):
+    """Central differences' force-and-kick row kernel called `count` times from compiled code."""
+    from numba import njit
+
+    @njit
+    def repeat(count, phys, sin, sout, work, t1, dt, rowbuf):
+        for _ in range(count):
+            kernel(phys, sin, sout, work, t1, dt, rowbuf)
+
+    return repeat
+
+
 def _triad_bandwidth(threads: int, repeats: int) -> float:
     """STREAM-triad bandwidth [B/s] (3 arrays of 64 MiB, write-allocate not counted)."""
     import numba
@@ -222,7 +235,8 @@ def bench_evaluation(n: int, threads: list[int], repeats: int, use_warp: bool) -
     model, integ, s = deformed_sheet(n)
     s2 = s.copy()
     args = iterate_args(integ, s, s2, DT)
-    xbuf, flag, err_rows = integ.work.xbuf, integ.work.flag, integ.work.err_rows
+    xbuf, flag = integ.work.xbuf, integ.work.flag
+    err_rows = integ.work.row_sums[:2]  # the error sums Warp's kernel computes
     flag[:] = 0  # no contact candidates: every free node counts in the error measure
     fabric_iterate(*args)
     segs, nodes = model.seg_count, model.node_count
@@ -243,6 +257,19 @@ def bench_evaluation(n: int, threads: list[int], repeats: int, use_warp: bool) -
         numba.set_num_threads(k)
         best, med = best_and_median(lambda c: repeat(c, *args), repeats)
         res["emf"][k] = (best, med)
+    # central differences' one evaluation: the force fused with the node's half kick
+    from emfabric._kernels.nodes import kick_rows, kick_rows_threads
+
+    integ.work.xbuf[:] = s.node_x
+    res["cd"] = {}
+    for k in threads:
+        numba.set_num_threads(k)
+        buf = integ.threads if k > 1 else np.empty(integ.rowbuf.shape if integ.rowbuf
+                                                    is not None else integ.threads.shape[1:])
+        kern = kick_rows_threads if k > 1 else kick_rows
+        cd_args = (model.physics, s.arrays, s2.arrays, integ.work, s.t + DT, DT, buf)
+        best, med = best_and_median(lambda c, f=kern, a=cd_args: _cd_repeat(f)(c, *a), repeats)
+        res["cd"][k] = (best, med)
     numba.set_num_threads(threads[0])
 
     def python_calls(count):
@@ -280,12 +307,14 @@ def bench_evaluation(n: int, threads: list[int], repeats: int, use_warp: bool) -
 
 def print_evaluations(rows: list[dict], threads: list[int], warp_note: str,
                       bandwidth: dict[int, float]) -> None:
-    say("(a) one force evaluation + node update (fabric_iterate) on a dented, moving sheet")
+    say("(a) one force evaluation + node update on a dented, moving sheet: the φ-scheme's "
+        "fabric_iterate, and central differences' kick_rows (force, magnetic rotation, kick)")
     say(f"    state: reference grid + centre dent {BUMP_DEPTH * 1e3:g} mm deep over r < "
         f"{BUMP_RADIUS * 1e3:g} mm, v_z up to {BUMP_SPEED:g} m/s, Δt = {DT:g} s")
     say("    times: best (median) of the samples; emfabric called in a compiled loop")
     head = (f"    {'grid':>9} {'segments':>9} {'thr':>3} | {'emfabric ns/seg':>16} "
-            f"{'µs/eval':>8} | {'Warp CPU ns/seg':>16} {'µs/eval':>8} | {'Warp ÷ emfabric':>15}")
+            f"{'µs/eval':>8} | {'Warp CPU ns/seg':>16} {'µs/eval':>8} | {'Warp ÷ emfabric':>15}"
+            f" | {'central diff. ns/seg':>20}")
     say(head)
     say("    " + "-" * (len(head) - 4))
     for r in rows:
@@ -298,9 +327,11 @@ def print_evaluations(rows: list[dict], threads: list[int], warp_note: str,
                 wcol = (f"{warp[0] / r['segs'] * 1e9:7.2f} ({warp[1] / r['segs'] * 1e9:6.2f})"
                         f" {warp[0] * 1e6:8.1f}")
                 ratio = f"{warp[0] / best:14.2f}×"
+            cb, cm = r["cd"][k]
             say(f"    {r['n']:>4}×{r['n']:<4} {r['segs']:>9} {k:>3} | "
                 f"{best / r['segs'] * 1e9:7.2f} ({med / r['segs'] * 1e9:6.2f}) "
-                f"{best * 1e6:8.1f} | {wcol} | {ratio}")
+                f"{best * 1e6:8.1f} | {wcol} | {ratio} | "
+                f"{cb / r['segs'] * 1e9:9.2f} ({cm / r['segs'] * 1e9:6.2f})")
     if any(r["warp"] for r in rows) and len(threads) > 1:
         say("    Warp's CPU device runs a launch on one thread: the same figure in both rows.")
     if warp_note:
@@ -331,7 +362,7 @@ def print_evaluations(rows: list[dict], threads: list[int], warp_note: str,
 def _step_loop(sc, steps: int, samples: list | None):
     """The run's steps as a bare Integrator.step loop (no recording): (seconds, model, integ);
     appends 10 evenly spaced (state, candidate flags) pairs to `samples` when given one."""
-    from emfabric.integrators import Integrator
+    from emfabric.integrators import make_integrator
     from emfabric.sim.builder import build_model
     from emfabric.sim.state import initial_state
 
@@ -339,7 +370,7 @@ def _step_loop(sc, steps: int, samples: list | None):
     keep_at = set(np.linspace(max(1, steps // 10), steps, 10, dtype=int).tolist())
     t0 = time.perf_counter()
     model = build_model(sc)
-    integ = Integrator(model)
+    integ = make_integrator(model)
     s_in = initial_state(model)
     s_out = s_in.copy()
     flag = integ.work.flag
@@ -371,9 +402,21 @@ def bench_full_run(runs: int, repeats: int, base: dict) -> dict:
     flag = integ.work.flag
     for st, fl in samples:
         flag[:] = fl
-        args = iterate_args(integ, st, st.copy(), st.dt)
-        per_eval.append(best_and_median(lambda c, a=args: _compiled_repeat()(c, *a),
-                                        max(3, repeats // 2), target_s=0.1)[0])
+        if integ.name == "central-difference":
+            from emfabric._kernels.nodes import kick_rows, kick_rows_threads
+
+            rowbuf, threads = integ.kernel_buffers
+            integ.work.xbuf[:] = st.node_x
+            kern, buf = (kick_rows, rowbuf) if rowbuf is not None else (kick_rows_threads,
+                                                                        threads)
+            args = (model.physics, st.arrays, st.copy().arrays, integ.work, st.t + st.dt,
+                    st.dt, buf)
+            per_eval.append(best_and_median(lambda c, a=args, f=kern: _cd_repeat(f)(c, *a),
+                                            max(3, repeats // 2), target_s=0.1)[0])
+        else:
+            args = iterate_args(integ, st, st.copy(), st.dt)
+            per_eval.append(best_and_median(lambda c, a=args: _compiled_repeat()(c, *a),
+                                            max(3, repeats // 2), target_s=0.1)[0])
         u = stretch(model, st.node_x)
         tension.append(np.mean(u > 1.0))
         past.append(np.mean(u > model.material.critical_stretch))
@@ -503,13 +546,13 @@ def peak_rss() -> int:
 def child_memory(n: int) -> dict:
     """In a fresh interpreter: build the n×n paper-field model, integrator and two states."""
     from emfabric import load_scenario
-    from emfabric.integrators import Integrator
+    from emfabric.integrators import make_integrator
     from emfabric.sim.builder import build_model
     from emfabric.sim.state import initial_state
 
     rss0 = peak_rss()
     model = build_model(load_scenario(SCENARIO, {"fabric.nodes": [n, n]}))
-    integ = Integrator(model)
+    integ = make_integrator(model)
     s_in = initial_state(model)
     s_out = s_in.copy()
     seen: set = set()
@@ -690,6 +733,138 @@ def print_accuracy(rows: list[dict], ref_dt: float) -> None:
     say(f"    contact phase: {', '.join(phases)}")
 
 
+# --- (h) both schemes side by side ---------------------------------------------------------
+
+SIDE_BY_SIDE = {"paper-field": ((0,), 0.02, 0.03), "paper-spin": ((1, 2), 0.02, None),
+                "ogive-field": ((0,), 0.03, 0.05)}
+"""Scenarios of (h): the components of ω compared and the targets (largest |Δω(t)| over the
+contact phase as a fraction of the peak; |Δω| / |ω| when contact ends; None: no target)."""
+LOADED_END = {100: 100e-6, 200: 30e-6, 400: 10e-6, 1000: 3e-6}
+"""(i)'s simulated time per grid [s] (from the start: the sphere reaches the sheet at once)."""
+FINE = 8
+"""(h)'s converged run: central differences at courant / FINE, checked at courant / (2 FINE)."""
+
+
+def bench_side_by_side(names: list[str], cache: Path | None) -> list[dict]:
+    """Each scenario run by the φ-scheme (its defaults) and by central differences (the default
+    courant), against central differences at courant / FINE, itself checked at half that."""
+    from emfabric import load_scenario
+
+    out = []
+    for name in names:
+        comps = SIDE_BY_SIDE.get(name, ((0, 1, 2), None, None))[0]
+        courant = load_scenario(name, {"solver.integrator": "central-difference"}).solver.courant
+        fine = {"solver.integrator": "central-difference", "solver.courant": courant / FINE}
+        ref, ref_summary = _history_run(name, fine, cache)
+        chk, _ = _history_run(name, {**fine, "solver.courant": courant / (2 * FINE)}, cache)
+        row = {"name": name, "comps": comps, "courant": courant, "ref_summary": ref_summary,
+               "check": spin_error(ref, chk, comps), "schemes": {}}
+        for scheme in ("phi", "central-difference"):
+            gc.collect()
+            start = cpu_snapshot()
+            run, summary = _history_run(name, {"solver.integrator": scheme}, None)
+            row["schemes"][scheme] = {"summary": summary, "busy": other_cpu(start),
+                                      "error": spin_error(run, ref, comps)}
+        out.append(row)
+    return out
+
+
+def print_side_by_side(rows: list[dict]) -> None:
+    say(f"(h) both schemes, warm, one thread, against central differences at courant / {FINE} "
+        f"(checked at courant / {2 * FINE}); ω error over the contact phase as a fraction of "
+        "the peak of the components named, and |Δω|/|ω| when contact ends")
+    say(f"    {'scenario':<12} {'ω':<9} {'scheme':<20} {'wall s':>7} {'steps':>7} {'evals':>7} "
+        f"{'ω(t) error':>11} {'exit error':>11}   target")
+    names = "xyz"
+    for r in rows:
+        comps = ",".join("ω_" + names[k] for k in r["comps"])
+        _c, track_t, exit_t = SIDE_BY_SIDE.get(r["name"], (None, None, None))
+        evals = {}
+        for scheme, x in r["schemes"].items():
+            s, e = x["summary"], x["error"]
+            evals[scheme] = s["force_evaluations"]
+            label = scheme if scheme == "phi" else f"central-diff. {r['courant']:g}"
+            ok = ""
+            if scheme != "phi" and track_t is not None:
+                good = e["track"] <= track_t and (exit_t is None or e["exit"] <= exit_t)
+                ok = (f"{100 * track_t:.0f}%" + (f" / {100 * exit_t:.0f}%" if exit_t else "")
+                      + ("  met" if good else "  MISSED"))
+            say(f"    {r['name']:<12} {comps:<9} {label:<20} {s['wall_time_s']:7.2f} "
+                f"{s['steps']:7d} {s['force_evaluations']:7d} {100 * e['track']:10.2f}% "
+                f"{100 * e['exit']:10.2f}%   {ok}"
+                + ("" if x["busy"] < 0.1 else f"  ! machine busy ({x['busy']:.2f} other cores)"))
+        c = r["check"]
+        ratio = evals["phi"] / max(evals["central-difference"], 1)
+        walls = {k: x["summary"]["wall_time_s"] for k, x in r["schemes"].items()}
+        say(f"    {'':<12} {'':<9} converged run vs its half-step check: "
+            f"{100 * c['track']:.2f}% / {100 * c['exit']:.2f}%; φ ÷ central differences: "
+            f"{ratio:.1f}× the evaluations, {walls['phi'] / walls['central-difference']:.1f}× "
+            "the wall time")
+
+
+# --- (i) a loaded machine ------------------------------------------------------------------
+
+def _busy() -> None:
+    while True:
+        pass
+
+
+def child_threads(n: int, end_time: float, threads: int) -> dict:
+    """In a fresh interpreter: paper-field on an n×n sheet to end_time, warm (a first short run
+    compiles), with `threads` Numba threads (0: the default, chosen at run time)."""
+    from emfabric import load_scenario
+    from emfabric import run as run_scenario
+
+    over = {"fabric.nodes": [n, n]}
+    k = None if threads == 0 else threads
+    run_scenario(load_scenario(SCENARIO, {**over, "solver.end_time": 2e-7}), threads=k)
+    t0 = time.perf_counter()
+    res = run_scenario(load_scenario(SCENARIO, {**over, "solver.end_time": end_time}), threads=k)
+    return {"wall": time.perf_counter() - t0, "steps": res.summary["steps"]}
+
+
+def bench_loaded(cases: list[tuple[int, float]], busy: int) -> list[dict]:
+    """Each case (n, end time) with the default threads and with one, idle and beside `busy`
+    processes that spin."""
+    import multiprocessing as mp
+
+    rows = []
+    for n, end in cases:
+        row = {"n": n, "end": end}
+        for label in ("idle", "loaded"):
+            procs = []
+            if label == "loaded":
+                procs = [mp.get_context("spawn").Process(target=_busy, daemon=True)
+                         for _ in range(busy)]
+                for pr in procs:
+                    pr.start()
+            try:
+                for k in (0, 1):
+                    row[(label, k)] = child("threads", str(n), repr(end), str(k))
+            finally:
+                for pr in procs:
+                    pr.kill()
+        rows.append(row)
+    return rows
+
+
+def print_loaded(rows: list[dict], busy: int) -> None:
+    import numba
+
+    say(f"(i) threads on an idle machine and beside {busy} busy processes: paper-field, warm, "
+        f"default threads (up to {numba.config.NUMBA_NUM_THREADS}, chosen at run time) against "
+        "one thread")
+    say(f"    {'grid':>9} {'to µs':>6} {'steps':>6} | {'idle default':>12} {'idle 1 thr':>10} "
+        f"{'ratio':>6} | {'loaded default':>14} {'loaded 1 thr':>12} {'ratio':>6}")
+    for r in rows:
+        i0, i1, l0, l1 = (r[("idle", 0)]["wall"], r[("idle", 1)]["wall"],
+                          r[("loaded", 0)]["wall"], r[("loaded", 1)]["wall"])
+        say(f"    {r['n']:>4}×{r['n']:<4} {r['end'] * 1e6:6.0f} {r[('idle', 0)]['steps']:6d} | "
+            f"{i0:10.2f} s {i1:8.2f} s {i0 / i1:5.2f}× | {l0:12.2f} s {l1:10.2f} s "
+            f"{l0 / l1:5.2f}×")
+    say("    target: default ≤ 1.1× one thread, loaded")
+
+
 # --- (f) a large struck sheet, and the cost of a run against the grid ---------------------
 
 def bench_large(n: int, after_contact: float) -> dict:
@@ -698,7 +873,7 @@ def bench_large(n: int, after_contact: float) -> dict:
     controller's first shrinking from dt_max is not what a run spends its time on). Time per
     step, Δt, evaluations per step, bytes of the run's arrays, peak memory."""
     from emfabric import load_scenario
-    from emfabric.integrators import Integrator
+    from emfabric.integrators import make_integrator
     from emfabric.sim.builder import build_model
     from emfabric.sim.state import initial_state
 
@@ -706,7 +881,7 @@ def bench_large(n: int, after_contact: float) -> dict:
     rss0 = peak_rss()
     t0 = time.perf_counter()
     model = build_model(sc)
-    integ = Integrator(model)
+    integ = make_integrator(model)
     s_in = initial_state(model)
     s_out = s_in.copy()
     setup = time.perf_counter() - t0
@@ -987,6 +1162,17 @@ def main(argv: list[str] | None = None) -> None:
                    help="(f): the struck N×N sheet (default 1000; 0 skips (f) and (g))")
     p.add_argument("--after-contact", type=float, default=2e-6, metavar="SECONDS",
                    help="(f), (g): how long past the first contact the large sheets run")
+    p.add_argument("--side-by-side", nargs="*", metavar="SCENARIO",
+                   default=list(SIDE_BY_SIDE),
+                   help="(h): these scenarios by both schemes (none: skip)")
+    p.add_argument("--side-by-side-only", action="store_true", help="only (h)")
+    p.add_argument("--loaded", type=int, nargs="*", default=[100, 400], metavar="N",
+                   help="(i): these grids with default threads and one, idle and loaded "
+                        "(none: skip)")
+    p.add_argument("--loaded-only", action="store_true", help="only (i)")
+    p.add_argument("--busy", type=int, default=3, help="busy processes beside (i)'s runs")
+    p.add_argument("--measure-up-to", type=int, default=100, metavar="N",
+                   help="(g): whole runs measured up to this grid, projected above")
     p.add_argument("--cost-sizes", type=int, nargs="+", default=[40, 70, 100, 200, 400],
                    help="(g): grid sizes besides --large (≤ 100: whole runs)")
     p.add_argument("--child", nargs="+", help=argparse.SUPPRESS)
@@ -997,7 +1183,9 @@ def main(argv: list[str] | None = None) -> None:
         if mode == "large":
             out = bench_large(int(rest[0]), float(rest[1]))
         else:
-            out = child_startup() if mode == "startup" else child_memory(int(rest[0]))
+            out = (child_startup() if mode == "startup" else
+                   child_threads(int(rest[0]), float(rest[1]), int(rest[2]))
+                   if mode == "threads" else child_memory(int(rest[0])))
         print(json.dumps(out))
         return
 
@@ -1016,6 +1204,14 @@ def main(argv: list[str] | None = None) -> None:
     if a.schemes:
         bench_schemes(a.reference_dt, a.reference_cache)
         say(f"Other processes used {other_cpu(cpu0):.2f} cores on average while this ran")
+        return
+    loaded_cases = [(n, LOADED_END.get(n, 5e-6)) for n in a.loaded]
+    if a.side_by_side_only:
+        print_side_by_side(bench_side_by_side(a.side_by_side, a.reference_cache))
+        say(f"Other processes used {other_cpu(cpu0):.2f} cores on average while this ran")
+        return
+    if a.loaded_only:
+        print_loaded(bench_loaded(loaded_cases, a.busy), a.busy)
         return
     if a.accuracy_only:
         acc = bench_accuracy(a.accuracy, a.reference_dt, a.reference_cache)
@@ -1077,7 +1273,7 @@ def main(argv: list[str] | None = None) -> None:
         full = {} if fr is None or a.end_time is not None else {100: fr["summaries"][0]}
         short = {}
         for n in sorted(set(a.cost_sizes + [a.large])):
-            if n <= 100 and n not in full:
+            if n <= a.measure_up_to and n not in full:
                 full[n] = run_scenario(load_scenario(SCENARIO, {"fabric.nodes": [n, n]})).summary
             # in a fresh interpreter: its peak memory is the sheet's alone
             short[n] = child("large", str(n), repr(a.after_contact))
@@ -1087,6 +1283,16 @@ def main(argv: list[str] | None = None) -> None:
         contact = full[100]["time_s"] if 100 in full else 1e-3
         cost_table([short[n] for n in sorted(short)], full, contact)
         busy_note(section)
+        say()
+
+    if a.side_by_side and not a.quick:
+        section = cpu_snapshot()
+        print_side_by_side(bench_side_by_side(a.side_by_side, a.reference_cache))
+        busy_note(section)
+        say()
+
+    if a.loaded and not a.quick:
+        print_loaded(bench_loaded(loaded_cases, a.busy), a.busy)
         say()
 
     st = None

@@ -199,6 +199,7 @@ def test_adaptive_threads_switch_kernels_without_changing_the_run(monkeypatch):
 
     monkeypatch.setattr(base, "PROBE_EVERY", 6)
     monkeypatch.setattr(base, "PROBE_STEPS", 2)
+    monkeypatch.setattr(base, "PROBE_FIRST", 6)
     sc = load_scenario("demo-small", {"fabric.nodes": [24, 24], "solver.end_time": 8e-6,
                                       "projectile.gap": 0.0, **CD})
     model = build_model(sc)
@@ -238,3 +239,31 @@ def test_energy_balance_error_is_second_order():
         exchanged = float(ds.kinetic_energy_projectile[0] - ds.kinetic_energy_projectile[-1])
     assert errors[0] < 2e-3 * exchanged
     assert (errors[0] / errors[-1]) ** (1 / 3) > 3.5, errors
+
+
+def test_default_integrator_and_what_chooses_the_phi_scheme():
+    """Central differences by default; a key only the φ-scheme reads (solver.phi, tolerance, …,
+    contact.placement) chooses it when no integrator is written; a written integrator wins; the
+    φ-scheme's placement option with central differences is an error naming the key."""
+    from emfabric.config.scenario import ScenarioError
+
+    assert load_scenario("paper-field").solver.integrator == "central-difference"
+    for key, value in (("solver.phi", 1.0), ("solver.tolerance", 1e-8),
+                       ("solver.target_iterations", 4), ("contact.placement", "closest-point")):
+        assert load_scenario("paper-field", {key: value}).solver.integrator == "phi", key
+        both = {key: value, "solver.integrator": "central-difference"}
+        if key != "contact.placement":
+            assert load_scenario("paper-field", both).solver.integrator == "central-difference"
+    assert load_scenario("paper-field", {"solver.dt_max": 1e-7}).solver.integrator == \
+        "central-difference"
+    with pytest.raises(ScenarioError, match="contact.placement"):
+        load_scenario("paper-field", {"contact.placement": "closest-point", **CD})
+
+
+def test_step_below_dt_min_stops_with_a_clear_error():
+    """A stable step below solver.dt_min stops the run at once, saying so."""
+    from emfabric.integrators import DivergenceError
+
+    sc = load_scenario("demo-small", {"solver.dt_min": 5e-7, "solver.end_time": 2e-6, **CD})
+    with pytest.raises(DivergenceError, match="below solver.dt_min"):
+        run(sc)

@@ -33,7 +33,7 @@ def _contact(x_node, v_node, centre=(0, 0, 0), vel=(0, 0, 0), omega=(0, 0, 0), m
     state[BODY_R0:BODY_R0 + 3] = np.eye(3)
     work = make_work(1, 1)
     work.cand[0] = 0
-    work.err_rows[:] = 0.0
+    work.row_sums[:] = 0.0
     nc = node_contact(nodes, body, Contact(mu_s, mu_d), state, 1, x1, v1, work, 0.0, 0.0,
                       False)
     f = np.zeros(3)

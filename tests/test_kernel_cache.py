@@ -118,7 +118,7 @@ def test_parallel_kernels_are_not_cached_on_their_own():
                 if not isinstance(obj._cache, NullCache):
                     cached.add(obj.py_func.__name__)
     assert parallel == {"_iterate_rows_threads", "fill_node_fields_threads",
-                        "_force_rows_threads", "loop_values_on_grid"}
+                        "_drift_threads", "_kick_threads", "loop_values_on_grid"}
     for name in cached:
         callers = [src.name for src, text in sources.items()
                    if f"{name}(" in text.replace(f"def {name}(", "")]

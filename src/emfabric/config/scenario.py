@@ -351,12 +351,20 @@ class ContactSpec(_Section):
         return self
 
 
+PHI_KEYS = ("scheme", "predictor", "phi", "tolerance", "target_iterations", "exponent",
+            "adaptive", "max_iterations", "dt_initial", "safety", "anderson_depth")
+"""The solver keys only the φ-scheme reads: a scenario that sets one of them and not
+`integrator` runs the φ-scheme."""
+
+
 class SolverSpec(_Section):
-    integrator: Literal["phi", "central-difference"] = "phi"
-    """Time integration: "phi" the paper's implicit φ-scheme (fixed-point iteration, adaptive Δt,
-    eq. 3.9) or "central-difference" (explicit, one force evaluation per step, Δt = courant ×
-    the stability limit of the current state)."""
-    courant: Annotated[float, Field(gt=0.0, le=1.0)] = 0.5
+    integrator: Literal["phi", "central-difference"] = "central-difference"
+    """Time integration: "central-difference" (explicit, one force evaluation per step, Δt =
+    courant × the stability limit of the current state; the default) or "phi", the paper's
+    implicit φ-scheme (fixed-point iteration, adaptive Δt, eq. 3.9). Not given, it is "phi"
+    when the scenario sets a key only the φ-scheme reads (PHI_KEYS: phi, tolerance,
+    target_iterations, …), else "central-difference"."""
+    courant: Annotated[float, Field(gt=0.0, le=1.0)] = 0.25
     """central-difference: the fraction of the stable step (2/ω_max, ω_max² ≤ max 2Σk_t/m at the
     current stretches) taken [-]."""
     scheme: Literal["fixed-point", "anderson"] = "fixed-point"
@@ -389,6 +397,14 @@ class SolverSpec(_Section):
     """Factor on Φ_K of eq. 3.9; 1.0 is the paper-literal controller."""
     anderson_depth: Annotated[int, Field(ge=1, le=20)] = 5
     """History depth of scheme = "anderson" [-]."""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _phi_keys_choose_phi(cls, data: Any) -> Any:
+        if isinstance(data, dict) and "integrator" not in data and any(
+                k in data for k in PHI_KEYS):
+            data = {**data, "integrator": "phi"}
+        return data
 
     @model_validator(mode="after")
     def _dt_order(self) -> SolverSpec:
@@ -423,6 +439,31 @@ class Scenario(_Section):
     contact: ContactSpec = ContactSpec()
     solver: SolverSpec = SolverSpec()
     output: Output = Output()
+
+    @model_validator(mode="before")
+    @classmethod
+    def _placement_chooses_phi(cls, data: Any) -> Any:
+        # contact.placement is the φ-update's option: written without an integrator, it
+        # chooses the φ-scheme (as the φ-scheme's solver keys do, SolverSpec)
+        if not isinstance(data, dict):
+            return data
+        contact, solver = data.get("contact"), data.get("solver")
+        if (isinstance(contact, dict) and "placement" in contact
+                and not (isinstance(solver, dict) and "integrator" in solver)):
+            solver = dict(solver) if isinstance(solver, dict) else {}
+            data = {**data, "solver": {**solver, "integrator": "phi"}}
+        return data
+
+    @model_validator(mode="after")
+    def _placement_is_phi_only(self) -> Scenario:
+        if (self.solver.integrator == "central-difference"
+                and self.contact.placement != "phi-update"):
+            raise ValueError(
+                f"contact.placement = {self.contact.placement!r} is an option of the φ-scheme; "
+                "central differences put a sticking node where its material point on the "
+                "surface has moved (docs/theory.md §4.1). Allowed: solver.integrator = \"phi\" "
+                "with it, or no contact.placement")
+        return self
 
     @field_validator("name")
     @classmethod
@@ -821,6 +862,12 @@ def apply_overrides(scenario: Scenario, overrides: dict[str, Any]) -> Scenario:
             and "B" not in scenario.field.model_fields_set):
         # as in a file: with sources, the uniform B is only what is written (FieldSpec)
         data.setdefault("field", {}).pop("B", None)
+    if ("solver.integrator" not in overrides
+            and "integrator" not in scenario.solver.model_fields_set
+            and any(k in overrides for k in (*(f"solver.{p}" for p in PHI_KEYS),
+                                              "contact.placement"))):
+        # as in a file: a key only the φ-scheme reads chooses it (SolverSpec)
+        data.setdefault("solver", {}).pop("integrator", None)
     for key, value in overrides.items():
         parts = key.split(".")
         node = data

@@ -54,6 +54,8 @@ PROBE_EVERY = 1000
 count is chosen at run time (IntegratorBase, adaptive threads)."""
 PROBE_STEPS = 12
 """Steps timed per probe (the first step of a probe window is not counted)."""
+PROBE_FIRST = 3 * PROBE_STEPS
+"""The first probe comes after this many steps (then every PROBE_EVERY)."""
 
 
 class IntegratorBase(ABC):
@@ -70,11 +72,11 @@ class IntegratorBase(ABC):
     arguments, ``_compile_target``).
 
     Adaptive threads (``adaptive=True``, the default where threads may pay off): the scheme
-    times its steps, and every PROBE_EVERY steps runs PROBE_STEPS with the other kernel; it
-    keeps whichever was faster. On a loaded machine the threaded kernel waits at each barrier
-    for a descheduled thread and the serial one wins; idle, the threaded one wins on large
-    sheets. A subclass calls ``_before_step()`` first and ``_after_step(seconds)`` with the
-    kernel's wall time last in ``step``."""
+    times its steps, and after PROBE_FIRST steps and then every PROBE_EVERY runs PROBE_STEPS
+    with the other kernel; it keeps whichever was faster. On a loaded machine the threaded
+    kernel waits at each barrier for a descheduled thread and the serial one wins; idle, the
+    threaded one wins on large sheets. A subclass calls ``_before_step()`` first and
+    ``_after_step(seconds)`` with the kernel's wall time last in ``step``."""
 
     name = "base"
 
@@ -156,7 +158,8 @@ class IntegratorBase(ABC):
         recent = self._recent[self.threaded]
         recent.append(seconds)
         del recent[:-PROBE_STEPS]
-        if self._steps_timed % PROBE_EVERY == PROBE_EVERY // 2 and len(recent) == PROBE_STEPS:
+        due = self._steps_timed == PROBE_FIRST or self._steps_timed % PROBE_EVERY == 0
+        if due and len(recent) == PROBE_STEPS:
             self._use_threads(not self.threaded)
             self._probe_left = PROBE_STEPS + 1
 

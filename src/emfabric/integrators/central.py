@@ -86,7 +86,12 @@ class CentralDifference(IntegratorBase):
         for the initial state."""
         self._before_step()
         clock = self.clock()
-        dt = min(s_in.dt if s_in.steps > 0 else self.stable_dt(s_in), dt_limit)
+        step = s_in.dt if s_in.steps > 0 else self.stable_dt(s_in)
+        if step < self.dt_min:
+            self.fail(s_in, step, f"the explicit step {step:.3g} s (courant {self.courant:g} × "
+                      "the stability limit, or the no-tunnelling limit) is below solver.dt_min "
+                      f"= {self.dt_min:g} s")
+        dt = min(step, dt_limit)
         rejected = 0
         s_out.energy[:] = s_in.energy
         while True:
