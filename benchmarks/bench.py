@@ -741,7 +741,7 @@ SIDE_BY_SIDE = {"paper-field": ((0,), 0.02, 0.03), "paper-spin": ((1, 2), 0.02, 
 contact phase as a fraction of the peak; |Δω| / |ω| when contact ends; None: no target)."""
 LOADED_END = {100: 100e-6, 200: 30e-6, 400: 10e-6, 1000: 3e-6}
 """(i)'s simulated time per grid [s] (from the start: the sphere reaches the sheet at once)."""
-FINE = 8
+FINE = 4
 """(h)'s converged run: central differences at courant / FINE, checked at courant / (2 FINE)."""
 
 
