@@ -54,9 +54,12 @@ HERE = Path(__file__).resolve().parent
 SCENARIO = "paper-no-field"
 PEER_DIR = "/work/peer/VibeDynaLITE"
 PEER_PYTHON = "/work/peer/venv/bin/python"
-PEER_CFL = 0.5 * math.sqrt(2.0)
-"""The peer's Δt = cfl · min sqrt(m/Σk); emfabric's central differences take courant (0.5) ×
-2/ω_max with ω_max² ≤ 2Σk/m, i.e. 0.5·√2·sqrt(m/Σk): the same fraction of the same bound."""
+COURANT = 0.25
+"""emfabric's default solver.courant (config/scenario.py SolverSpec)."""
+PEER_CFL = COURANT * math.sqrt(2.0)
+"""The peer's Δt = cfl · min sqrt(m/Σk); emfabric's central differences take courant ×
+2/ω_max with ω_max² ≤ 2Σk/m, i.e. courant·√2·sqrt(m/Σk): the same fraction of the same
+bound. (The peer's GUI default is cfl = 0.8; --peer-cfl changes it.)"""
 
 
 def parse_args(argv=None) -> argparse.Namespace:
