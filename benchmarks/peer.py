@@ -231,9 +231,9 @@ def mismatches(cfg: dict, peer: dict | None, emf: dict, threads: int) -> list[tu
          "(φ = 0.5, fixed-point iteration, adaptive Δt of eq. 3.9)",
          "velocity Verlet (leapfrog, one force evaluation a step)"),
         ("step-size rule",
-         f"CD: 0.5 × 2/ω_max, ω_max² ≤ max 2Σk_t/m over free nodes with the tangent stiffness "
-         f"at the current stretch, also ≤ the no-tunnelling limit and dt_max; at rest "
-         f"{0.5 * math.sqrt(2) * gersh * 1e9:.0f} ns. φ: eq. 3.9 controller (6 iterations)",
+         f"CD: {COURANT:g} × 2/ω_max, ω_max² ≤ max 2Σk_t/m over free nodes with the tangent "
+         f"stiffness at the current stretch, also ≤ the no-tunnelling limit and dt_max; at rest "
+         f"{COURANT * math.sqrt(2) * gersh * 1e9:.0f} ns. φ: eq. 3.9 controller (6 iterations)",
          f"cfl {cfg['cfl_factor']:.4f} × min over ALL nodes (clamped ones too) of sqrt(m/Σk), "
          f"Σk = linear spring k + the penalty k of nodes within 2h of the body "
          f"(before contact too): {(peer['dt_mean'] if peer else cfl_dt(cfg, kp)) * 1e9:.0f} ns"),
