@@ -13,7 +13,14 @@ import math
 
 from numba import njit
 
-from emfabric._kernels.records import BODY_R0, BODY_V, BODY_W, BODY_X
+from emfabric._kernels.records import (
+    BODY_R0,
+    BODY_V,
+    BODY_W,
+    BODY_X,
+    SUM_ERROR_DEN,
+    SUM_ERROR_NUM,
+)
 from emfabric._kernels.shapes import (
     bounding_radius,
     contact_margin,
@@ -378,7 +385,7 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work):
 
 
 @njit(cache=True)
-def candidate_errors(nx, ncand, cand, x0, xk, x1, err_rows):
+def candidate_errors(nx, ncand, cand, x0, xk, x1, row_sums):
     """Add the contact candidates' terms of the error measure (after contact moved them)."""
     for idx in range(ncand):
         n = cand[idx]
@@ -386,11 +393,11 @@ def candidate_errors(nx, ncand, cand, x0, xk, x1, err_rows):
         ex = x1[0, n] - xk[0, n]
         ey = x1[1, n] - xk[1, n]
         ez = x1[2, n] - xk[2, n]
-        err_rows[0, row] += math.sqrt(ex * ex + ey * ey + ez * ez)
+        row_sums[SUM_ERROR_NUM, row] += math.sqrt(ex * ex + ey * ey + ez * ez)
         ex = x1[0, n] - x0[0, n]
         ey = x1[1, n] - x0[1, n]
         ez = x1[2, n] - x0[2, n]
-        err_rows[1, row] += math.sqrt(ex * ex + ey * ey + ez * ez)
+        row_sums[SUM_ERROR_DEN, row] += math.sqrt(ex * ex + ey * ey + ez * ez)
 
 
 @njit(cache=True)

@@ -29,7 +29,14 @@ from emfabric._kernels.fields import (
 )
 from emfabric._kernels.materials import damage_thresholds
 from emfabric._kernels.nodes import fused_iterate, fused_iterate_threads
-from emfabric._kernels.records import BODY_V, BODY_W, BODY_X, StateArrays
+from emfabric._kernels.records import (
+    BODY_V,
+    BODY_W,
+    BODY_X,
+    SUM_ERROR_DEN,
+    SUM_ERROR_NUM,
+    StateArrays,
+)
 from emfabric._kernels.shapes import bounding_radius, nodes_inside
 from emfabric._kernels.vec3 import copy_into, norm
 
@@ -87,7 +94,7 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
     t1 = t + dt
     x0, v0, b_in = sin.x, sin.v, sin.body
     x1, v1, f1, alpha_t, b_out = sout.x, sout.v, sout.f, sout.alpha, sout.body
-    xbuf, flag, err_rows = work.xbuf, work.flag, work.row_sums
+    xbuf, flag, row_sums = work.xbuf, work.flag, work.row_sums
 
     # one pass over the start state: the fastest node (contact reach) and the size of the
     # coordinates (a displacement below their round-off is no motion: ϖ would be noise/noise)
@@ -163,7 +170,7 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
             if phys.contact.segments:
                 nc = segment_contact(nodes, phys.yarns, body, phys.contact, b_out, nseg, nc,
                                      cur, v1, work)
-            candidate_errors(nodes.nx, ncand, work.cand, x0, prev, cur, err_rows)
+            candidate_errors(nodes.nx, ncand, work.cand, x0, prev, cur, row_sums)
             reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, imp_force, imp_moment)
             num_b, den_b, body_ok = body_update(body, phys.field, b_in, b_out, t1, phi, dt,
                                                 work.reaction, work.body_scratch, tol)
@@ -173,11 +180,11 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
         # rows j and ny−1−j first: a run mirrored in y (B reversed along x) gets the same ϖ
         # bit for bit, hence the same steps
         for j in range(ny // 2):
-            num += err_rows[0, j] + err_rows[0, ny - 1 - j]
-            den += err_rows[1, j] + err_rows[1, ny - 1 - j]
+            num += row_sums[SUM_ERROR_NUM, j] + row_sums[SUM_ERROR_NUM, ny - 1 - j]
+            den += row_sums[SUM_ERROR_DEN, j] + row_sums[SUM_ERROR_DEN, ny - 1 - j]
         if ny % 2 == 1:
-            num += err_rows[0, ny // 2]
-            den += err_rows[1, ny // 2]
+            num += row_sums[SUM_ERROR_NUM, ny // 2]
+            den += row_sums[SUM_ERROR_DEN, ny // 2]
         err_f = num / den if den > still else (0.0 if num <= still else 1.0)
         err_b = num_b / den_b if den_b > 0.0 else (0.0 if num_b == 0.0 else 1.0)
         err = max(err_f, err_b)
