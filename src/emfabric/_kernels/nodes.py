@@ -1,4 +1,7 @@
-"""One fixed-point iterate of the fabric: yarn tensions, node forces and the φ-update.
+"""The node kernels of both schemes: yarn tensions and node forces (_row_force), the φ-scheme's
+fixed-point iterate (fused_iterate) and central differences' half steps (drift_rows, kick_rows).
+
+φ-scheme:
 
 v1 = v0 + Δt/m (φ ψ(t+Δt) + (1−φ) ψ(t)),  x1 = x0 + Δt (φ v1 + (1−φ) v0)  (eqs. 3.2, A12–A13),
 with the Lorentz force q(E + v1 × B) implicit in v1 (solved exactly per node) and the yarn force
@@ -6,8 +9,13 @@ assembled as one difference per node and direction, (t_R − t_L) + (t_U − t_D
 mirror-symmetric states exactly symmetric. The material law is emfabric._kernels.materials, the
 field emfabric._kernels.fields.field_at (at each node's iterate position and at t + Δt).
 
+Central differences (emfabric._kernels.explicit): drift_rows kicks, turns (Boris with the exact
+angle) and drifts every node; kick_rows evaluates the force and consumes it at once in the second
+turn and kick, with the row sums the step needs (records.SUM_*).
+
 The kernels walk the regular weave row by row (the layout of emfabric._kernels.records): the
-tensions of a row never leave the cache.
+tensions of a row never leave the cache. Each has a serial and a row-block threaded form with
+the same arithmetic.
 """
 
 import math
@@ -396,7 +404,7 @@ def _rotate_row(nb, count, phys, nf, pos, t, tau, v, buf):
     turns by exactly θ = |q B/m| tau (the standard t = q B tau/(2m) turns by 2 atan(θ/2)): the
     cyclotron frequency is exact, |v| kept to round-off. t = (q B tau/(2m))·tan(y)/y with y =
     θ/2, the ratio from tan_ratio where every node's y² < TAN_SERIES_LIMIT (branch-free, so
-    vectorised), else each node by explicit.rotate's Rodrigues formula (any angle). Clamped
+    vectorised), else each node by Rodrigues's formula (rodrigues: any angle). Clamped
     nodes (1/m = 0) and uncharged ones are left exactly as they are."""
     nodes, fld = phys.nodes, phys.field
     im = nodes.inv_mass[nb:nb + count]
