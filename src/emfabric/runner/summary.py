@@ -47,6 +47,7 @@ def summarize(result) -> dict[str, Any]:
         "status": result.status,
         "end_reason": result.end_reason,
         "time_s": float(st.t),
+        "integrator": m.options.integrator,
         "steps": steps,
         "rejected_steps": int(st.rejected),
         "force_evaluations": int(st.evaluations),

@@ -62,10 +62,10 @@ class Options:
     """[s]"""
     checkpoint_seconds: float = 5.0
     """Wall time between checkpoints [s]."""
-    integrator: str = "phi"
-    """"phi" or "central-difference"."""
-    courant: float = 0.5
-    """central-difference: fraction of the stable step taken."""
+    integrator: str = "central-difference"
+    """"central-difference" (the default, as a scenario's) or "phi"."""
+    courant: float = 0.25
+    """central-difference: fraction of the stable step taken (the scenario's default)."""
 
     @classmethod
     def of(cls, scenario: Scenario) -> Options:
