@@ -807,8 +807,10 @@ def print_side_by_side(rows: list[dict]) -> None:
 # --- (i) a loaded machine ------------------------------------------------------------------
 
 def _busy() -> None:
+    """Spin one core (a busy neighbour of (i)'s runs) until killed."""
+    x = 0
     while True:
-        pass
+        x += 1
 
 
 def child_threads(n: int, end_time: float, threads: int) -> dict:

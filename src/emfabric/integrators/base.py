@@ -8,7 +8,6 @@ from __future__ import annotations
 import math
 import statistics
 import threading
-import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
@@ -162,10 +161,6 @@ class IntegratorBase(ABC):
         if due and len(recent) == PROBE_STEPS:
             self._use_threads(not self.threaded)
             self._probe_left = PROBE_STEPS + 1
-
-    @staticmethod
-    def clock() -> float:
-        return time.perf_counter()
 
     # --- compiling the threaded kernel beside the run --------------------------------------
 
