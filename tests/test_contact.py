@@ -13,7 +13,7 @@ from emfabric._kernels.records import (
     SHAPE_SPHERE,
     Body,
     Contact,
-    Nodes,
+    grid_nodes,
     make_work,
 )
 
@@ -25,13 +25,13 @@ def _contact(x_node, v_node, centre=(0, 0, 0), vel=(0, 0, 0), omega=(0, 0, 0), m
     x1 = np.array(x_node, dtype=float).reshape(3, 1).copy()
     v1 = np.array(v_node, dtype=float).reshape(3, 1).copy()
     x0 = x1.copy()
-    nodes = Nodes(1, 1, x0.copy(), np.array([mass]), np.array([1 / mass]), np.zeros(1))
+    nodes = grid_nodes(1, 1, x0.copy(), np.array([mass]), np.array([1 / mass]), np.zeros(1))
     body = Body(True, SHAPE_SPHERE, R, 1.0, np.eye(3), np.zeros((0, 3)), np.zeros(0),
                 np.zeros(3))
     state = np.zeros((BODY_ROWS, 3))
     state[BODY_X], state[BODY_V], state[BODY_W] = centre, vel, omega
     state[BODY_R0:BODY_R0 + 3] = np.eye(3)
-    work = make_work(1, 1)
+    work = make_work(1, 1, 0)
     work.cand[0] = 0
     work.row_sums[:] = 0.0
     nc = node_contact(nodes, body, Contact(mu_s, mu_d), state, 1, x1, v1, work, 0.0, 0.0,
@@ -125,13 +125,13 @@ def test_sticking_node_lands_where_its_phi_update_puts_it():
     v_trial = vel + np.cross(omega, R * n0) - 40.0 * n0 + 5.0 * tangent
     x1 = x_trial.reshape(3, 1).copy()
     v1 = v_trial.reshape(3, 1).copy()
-    nodes = Nodes(1, 1, x1.copy(), np.array([m]), np.array([1 / m]), np.zeros(1))
+    nodes = grid_nodes(1, 1, x1.copy(), np.array([m]), np.array([1 / m]), np.zeros(1))
     body = Body(True, SHAPE_SPHERE, R, 1.0, np.eye(3), np.zeros((0, 3)), np.zeros(0),
                 np.zeros(3))
     state = np.zeros((BODY_ROWS, 3))
     state[BODY_V], state[BODY_W] = vel, omega
     state[BODY_R0:BODY_R0 + 3] = np.eye(3)
-    work = make_work(1, 1)
+    work = make_work(1, 1, 0)
     work.cand[0] = 0
     assert node_contact(nodes, body, Contact(1.0, 0.95), state, 1, x1, v1, work, phi, dt,
                         False) == 1

@@ -15,10 +15,10 @@ from emfabric._kernels.records import (
     Contact,
     Field,
     Material,
-    Nodes,
     Physics,
     StateArrays,
     Yarns,
+    grid_nodes,
     make_work,
 )
 from emfabric._kernels.step import fabric_iterate
@@ -32,9 +32,10 @@ def _node_forces(x, nx, ny, coef, rest_w, rest_f, alpha, kind=0, fung_h=0.0, u_c
     n, s = nx * ny, ny * (nx - 1) + (ny - 1) * nx
     rest = np.concatenate([np.full(ny * (nx - 1), rest_w), np.full((ny - 1) * nx, rest_f)])
     # the kernel reads only the stiffness 𝔼A0/L0 (coef) of the yarn record
-    yarns = Yarns(np.zeros((s, 2), np.int64), rest, 1 / rest**2, coef, coef * rest / A0, A0)
+    yarns = Yarns(np.zeros((s, 2), np.int64), rest, 1 / rest**2, coef, coef * rest / A0, A0,
+                  np.array([0, s]))
     phys = Physics(
-        Nodes(nx, ny, x.copy(), np.ones(n), np.ones(n), np.zeros(n)),
+        grid_nodes(nx, ny, x.copy(), np.ones(n), np.ones(n), np.zeros(n)),
         yarns,
         Material(kind, fung_h, u_crit, rate, 0.5),
         Field(np.zeros(3), np.zeros(3), 0, 0.0, np.zeros(3)),
@@ -44,7 +45,7 @@ def _node_forces(x, nx, ny, coef, rest_w, rest_f, alpha, kind=0, fung_h=0.0, u_c
     )
     start = StateArrays(x, np.zeros((3, n)), np.zeros((3, n)), alpha, np.zeros((8, 3)))
     f1, a_out = np.empty((3, n)), np.empty(s)
-    work = make_work(nx, ny)
+    work = make_work(n, ny, s)
     work.flag[:] = 1  # no error measure
     out = StateArrays(np.empty((3, n)), np.empty((3, n)), f1, a_out, np.zeros((8, 3)))
     fabric_iterate(phys, x, start, out, work, np.empty((ROWBUF_ROWS, nx + 1)), None, 0.0, 1.0,

@@ -18,6 +18,7 @@ from emfabric._kernels.records import (
     BODY_V,
     BODY_W,
     BODY_X,
+    ROW_COUNT,
     SUM_ERROR_DEN,
     SUM_ERROR_NUM,
 )
@@ -384,12 +385,22 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work):
     return nc
 
 
+@njit(cache=True, inline="always")
+def node_row(nodes, n):
+    """The grid row of node n (records' layout)."""
+    p = 0
+    while n >= nodes.ply_nodes[p + 1]:
+        p += 1
+    j0 = nodes.ply_rows[p]
+    return j0 + (n - nodes.ply_nodes[p]) // nodes.rows[j0, ROW_COUNT]
+
+
 @njit(cache=True)
-def candidate_errors(nx, ncand, cand, x0, xk, x1, row_sums):
+def candidate_errors(nodes, ncand, cand, x0, xk, x1, row_sums):
     """Add the contact candidates' terms of the error measure (after contact moved them)."""
     for idx in range(ncand):
         n = cand[idx]
-        row = n // nx
+        row = node_row(nodes, n)
         ex = x1[0, n] - xk[0, n]
         ey = x1[1, n] - xk[1, n]
         ez = x1[2, n] - xk[2, n]

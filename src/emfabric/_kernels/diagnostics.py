@@ -45,6 +45,10 @@ from emfabric._kernels.records import (
     ENERGY_PROJECTION,
     ENERGY_WORK_FIELD,
     ENERGY_WORK_GRAVITY,
+    ROW_COUNT,
+    ROW_FILL,
+    ROW_NODE,
+    ROW_WARP,
 )
 from emfabric._kernels.vec3 import (
     cross,
@@ -90,7 +94,6 @@ def fabric_diagnostics(phys, x, v, alpha, centre, direction, out):
     strain energy, broken yarns, min α, and the nodes' extent/speed along the flight direction.
     """
     nodes, yarns = phys.nodes, phys.yarns
-    nx, ny = nodes.nx, nodes.ny
     xref, mass = nodes.x0, nodes.mass
     coef, rest, il2 = yarns.stiffness, yarns.rest_length, yarns.inv_rest2
     ke = 0.0
@@ -121,15 +124,22 @@ def fabric_diagnostics(phys, x, v, alpha, centre, direction, out):
         vd = vx * direction[0] + vy * direction[1] + vz * direction[2]
         approach = max(approach, -vd)
         recede = max(recede, vd)
-    # rest lengths are uniform per family on the grid: warp rows, then the fill block
-    nw = ny * (nx - 1)
+    # rest lengths are uniform per family within a ply: per ply, its warp rows, then its fill
+    # block (records' layout)
+    rows = nodes.rows
     stats = (0.0, 0.0, 0.0, 1.0)
-    last = rest.shape[0] - 1
-    for j in range(ny):
-        stats = _yarn_stats(x, j * nx, nx - 1, 1, j * (nx - 1), alpha, coef, rest[0] ** 2,
-                            il2[0], phys.material, stats)
-    stats = _yarn_stats(x, 0, (ny - 1) * nx, nx, nw, alpha, coef, rest[last] ** 2, il2[last],
-                        phys.material, stats)
+    for ply in range(nodes.ply_rows.shape[0] - 1):
+        j0 = nodes.ply_rows[ply]
+        j1 = nodes.ply_rows[ply + 1]
+        nx = rows[j0, ROW_COUNT]
+        sw = rows[j0, ROW_WARP]
+        for j in range(j0, j1):
+            stats = _yarn_stats(x, rows[j, ROW_NODE], nx - 1, 1, rows[j, ROW_WARP], alpha, coef,
+                                rest[sw] ** 2, il2[sw], phys.material, stats)
+        if j1 - j0 > 1:
+            sf = rows[j0, ROW_FILL]
+            stats = _yarn_stats(x, rows[j0, ROW_NODE], (j1 - j0 - 1) * nx, nx, sf, alpha,
+                                coef, rest[sf] ** 2, il2[sf], phys.material, stats)
     u2max, strain, broken, amin = stats
     out[KE] = ke
     out[PX] = p[0]

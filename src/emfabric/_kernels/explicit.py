@@ -56,6 +56,7 @@ from emfabric._kernels.nodes import (
     kick_rows,
     kick_rows_threads,
 )
+from emfabric._kernels.plies import ply_contact
 from emfabric._kernels.records import (
     BODY_F,
     BODY_M,
@@ -298,6 +299,9 @@ def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
     ny = nodes.ny
     w_field = _sum_rows(sums[SUM_WORK_FIELD], ny)
     w_grav = _sum_rows(sums[SUM_WORK_GRAVITY], ny)
+    # plies meet their neighbours at the drifted positions (before the projectile, which has
+    # the last word on the nodes it touches)
+    d_ply, w_ply = ply_contact(phys, sout.x, sout.v, sin.f, work, half)
     for n in range(sout.contact.shape[1]):
         for c in range(4):
             sout.contact[c, n] = 0.0
@@ -395,10 +399,10 @@ def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
     energy[ENERGY_WORK_FIELD] += w_field
     energy[ENERGY_WORK_GRAVITY] += w_grav
     energy[ENERGY_FRICTION] += d_fric
-    energy[ENERGY_CONTACT] += d_cont
-    energy[ENERGY_PROJECTION] += d_proj
+    energy[ENERGY_CONTACT] += d_cont + d_ply
+    energy[ENERGY_PROJECTION] += d_proj + w_ply
     energy[ENERGY_DAMAGE] += d_dam
-    total = w_field + w_grav + d_cont + d_fric + d_proj + d_dam + size
+    total = w_field + w_grav + d_cont + d_fric + d_proj + d_dam + size + d_ply + w_ply
     for c in range(3):
         total += b_out[BODY_V, c] + b_out[BODY_W, c]
     stable = 2.0 / math.sqrt(worst) if worst > 0.0 else math.inf

@@ -13,7 +13,7 @@ Central differences (emfabric._kernels.explicit): drift_rows kicks, turns (Boris
 angle) and drifts every node; kick_rows evaluates the force and consumes it at once in the second
 turn and kick, with the row sums the step needs (records.SUM_*).
 
-The kernels walk the regular weave row by row (the layout of emfabric._kernels.records): the
+The kernels walk the plies' regular weaves row by row (the layout of emfabric._kernels.records): the
 tensions of a row never leave the cache. Each has a serial and a row-block threaded form with
 the same arithmetic.
 """
@@ -25,6 +25,10 @@ from numba import njit, prange
 from emfabric._kernels.fields import magnetic_force, node_field
 from emfabric._kernels.materials import damage_above, stress_factor, stretch_sq, tangent_factor
 from emfabric._kernels.records import (
+    ROW_COUNT,
+    ROW_FILL,
+    ROW_NODE,
+    ROW_WARP,
     SUM_ERROR_DEN,
     SUM_ERROR_NUM,
     SUM_PROJECTION,
@@ -37,17 +41,17 @@ from emfabric._kernels.records import (
 
 
 @njit(cache=True)
-def _row_sums(err_num, err_den, nx, ny, row_sums):
+def _row_sums(err_num, err_den, rows, row_sums):
     """Per-row sums of the error terms in a fixed order (four interleaved partial sums).
 
     No fastmath here: a reassociated reduction may be vectorised differently when compiled
     afresh or loaded from Numba's cache, and a last-bit change of ϖ changes Δt and so the run.
     """
-    for j in range(ny):
+    for j in range(rows.shape[0]):
         a0 = a1 = a2 = a3 = 0.0
         b0 = b1 = b2 = b3 = 0.0
-        start = j * nx
-        stop = start + nx
+        start = rows[j, ROW_NODE]
+        stop = start + rows[j, ROW_COUNT]
         i = start
         while i + 3 < stop:
             a0 += err_num[i]
@@ -152,24 +156,23 @@ def _tensions(xa, xb, count, inv_rest2, seg, mat, buf, out, mode):
 def _block_start(j0, phys, prev, sin, sout, work, buf, mode):
     """Prepare a block's row buffer before its first row j0: zero the padding of the warp row
     and set the fill tensions (with mode & TANGENT their stiffness) from the row below
-    (recomputed, writing no damage, so that blocks are independent; zero for the first row).
-    Returns (fill_up, fill_down) views."""
+    (recomputed, writing no damage, so that blocks are independent; zero for the first row of
+    a ply). Returns (fill_up, fill_down) views."""
     nodes, yarns, mat = phys.nodes, phys.yarns, phys.material
-    nx, ny = nodes.nx, nodes.ny
-    nw = ny * (nx - 1)
+    rows = nodes.rows
     xx, xy, xz = prev[0], prev[1], prev[2]
     twp = buf[ROW_WARP_TENSION:ROW_WARP_TENSION + 4]
     tu = buf[ROW_FILL_UP:ROW_FILL_UP + 4]
     td = buf[ROW_FILL_DOWN:ROW_FILL_DOWN + 4]
     twp[:, 0] = 0.0
-    twp[:, nx] = 0.0
-    if j0 > 0:
-        a = (j0 - 1) * nx
-        s = nw + a
+    s = rows[j0 - 1, ROW_FILL] if j0 > 0 else -1
+    if s >= 0:
+        a = rows[j0 - 1, ROW_NODE]
+        nx = rows[j0 - 1, ROW_COUNT]
         coef = yarns.stiffness
         _tensions((xx[a:a + nx], xy[a:a + nx], xz[a:a + nx]),
                   (xx[a + nx:a + 2 * nx], xy[a + nx:a + 2 * nx], xz[a + nx:a + 2 * nx]), nx,
-                  yarns.inv_rest2[yarns.inv_rest2.shape[0] - 1],
+                  yarns.inv_rest2[s],
                   (sin.alpha[s:s + nx], sout.alpha[s:s + nx], work.damage_thr[s:s + nx],
                    coef[s:s + nx]), mat, buf, td, mode & TANGENT)
     else:
@@ -190,34 +193,36 @@ def _row_force(j, phys, prev, sin, sout, work, t1, buf, tu, td, mode):
     nodes, yarns, mat, fld = phys.nodes, phys.yarns, phys.material, phys.field
     node_fields = work.node_field
     alpha_c, alpha_t, damage_thr = sin.alpha, sout.alpha, work.damage_thr
-    nx, ny = nodes.nx, nodes.ny
     mass, charge = nodes.mass, nodes.charge
     coef = yarns.stiffness
     grav = fld.gravity
-    nw = ny * (nx - 1)
-    # rest lengths are uniform per yarn family on the regular grid
-    inv_rest2_warp = yarns.inv_rest2[0]
-    inv_rest2_fill = yarns.inv_rest2[yarns.inv_rest2.shape[0] - 1]
+    # the row's nodes and first segments (records.Nodes.rows); rest lengths are uniform per
+    # yarn family within a ply
+    nb = nodes.rows[j, ROW_NODE]
+    nx = nodes.rows[j, ROW_COUNT]
+    sb = nodes.rows[j, ROW_WARP]
+    sf = nodes.rows[j, ROW_FILL]
     xx, xy, xz = prev[0], prev[1], prev[2]
     # padded warp row: twp[:, i + 1] is the tension of segment (i, i + 1), zeros at both ends
     twp = buf[ROW_WARP_TENSION:ROW_WARP_TENSION + 4]
+    twp[:, nx] = 0.0
     f = buf[ROW_FORCE:ROW_FORCE + 3]
-    nb = j * nx
-    sb = j * (nx - 1)
     e = nb + nx
     _tensions((xx[nb:e - 1], xy[nb:e - 1], xz[nb:e - 1]), (xx[nb + 1:e], xy[nb + 1:e],
-              xz[nb + 1:e]), nx - 1, inv_rest2_warp,
+              xz[nb + 1:e]), nx - 1, yarns.inv_rest2[sb],
               (alpha_c[sb:sb + nx - 1], alpha_t[sb:sb + nx - 1],
                damage_thr[sb:sb + nx - 1], coef[sb:sb + nx - 1]), mat, buf, twp[:, 1:],
               mode | ALPHA)
-    if j < ny - 1:
+    if sf >= 0:
         _tensions((xx[nb:e], xy[nb:e], xz[nb:e]), (xx[e:e + nx], xy[e:e + nx],
-                  xz[e:e + nx]), nx, inv_rest2_fill,
-                  (alpha_c[nw + nb:nw + e], alpha_t[nw + nb:nw + e],
-                   damage_thr[nw + nb:nw + e], coef[nw + nb:nw + e]), mat, buf, tu,
+                  xz[e:e + nx]), nx, yarns.inv_rest2[sf],
+                  (alpha_c[sf:sf + nx], alpha_t[sf:sf + nx],
+                   damage_thr[sf:sf + nx], coef[sf:sf + nx]), mat, buf, tu,
                   mode | ALPHA)
     else:
-        tu[:, :nx] = 0.0
+        # the ply's last row: no fill above it (the whole width, so that the first row of the
+        # next ply finds no tension from below)
+        tu[:, :] = 0.0
     m = mass[nb:e]
     q = charge[nb:e]
     # the field at t1 where the node is now (the iterate). The uniform and half-space
@@ -249,7 +254,6 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
     x1, v1, f1 = sout.x, sout.v, sout.f
     skip_err = work.flag
     err_num, err_den = work.err_num, work.err_den
-    nx = nodes.nx
     inv_mass, charge = nodes.inv_mass, nodes.charge
     xx, xy, xz = prev[0], prev[1], prev[2]
     tu, td = _block_start(j0, phys, prev, sin, sout, work, buf, 0)
@@ -261,7 +265,8 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
     dt_over_m = buf[ROW_DT_OVER_MASS]
     for j in range(j0, j1):
         _row_force(j, phys, prev, sin, sout, work, t1, buf, tu, td, 0)
-        nb = j * nx
+        nb = nodes.rows[j, ROW_NODE]
+        nx = nodes.rows[j, ROW_COUNT]
         e = nb + nx
         im = inv_mass[nb:e]
         q = charge[nb:e]
@@ -348,7 +353,7 @@ def fused_iterate(phys, prev, sin, sout, work, t1, phi, dt, rowbuf):
         j0 = b * ROWS_PER_BLOCK
         j1 = min(ny, j0 + ROWS_PER_BLOCK)
         _row_block(j0, j1, rec, prev, sin, sout, work, t1, phi, dt, rowbuf)
-    _row_sums(work.err_num, work.err_den, phys.nodes.nx, ny, work.row_sums)
+    _row_sums(work.err_num, work.err_den, phys.nodes.rows, work.row_sums)
 
 
 @njit  # never cached on its own: see fused_iterate_threads' docstring
@@ -368,7 +373,7 @@ def fused_iterate_threads(phys, prev, sin, sout, work, t1, phi, dt, rowbuf):
     caller, it is linked into the caller's cached code."""
     _iterate_rows_threads(phys.nodes, phys.yarns, phys.material, phys.field, prev, sin, sout,
                           work, t1, phi, dt, rowbuf)
-    _row_sums(work.err_num, work.err_den, phys.nodes.nx, phys.nodes.ny, work.row_sums)
+    _row_sums(work.err_num, work.err_den, phys.nodes.rows, work.row_sums)
 
 
 @njit(parallel=True)  # never cached on its own, as fused_iterate_threads
@@ -497,13 +502,13 @@ def _drift_block(j0, j1, phys, sin, sout, work, t0, dt, buf):
     nodes, fld = phys.nodes, phys.field
     nf = work.node_field
     sums = work.row_sums
-    nx = nodes.nx
     grav = fld.gravity
     half = 0.5 * dt
     vm = buf[ROW_VEL_EXPLICIT:ROW_VEL_EXPLICIT + 3]
     wfield, wgrav = buf[ROW_INV_DENOM], buf[ROW_DT_OVER_MASS]
     for j in range(j0, j1):
-        nb = j * nx
+        nb = nodes.rows[j, ROW_NODE]
+        nx = nodes.rows[j, ROW_COUNT]
         e = nb + nx
         im = nodes.inv_mass[nb:e]
         m = nodes.mass[nb:e]
@@ -553,7 +558,6 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
     nf = work.node_field
     sums = work.row_sums
     flag, xbuf, v_pre = work.flag, work.xbuf, work.v_pre
-    nx = nodes.nx
     grav = fld.gravity
     half = 0.5 * dt
     x1, v1 = sout.x, sout.v
@@ -563,7 +567,8 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
     wfield, wgrav, speed2 = buf[ROW_INV_DENOM], buf[ROW_DT_OVER_MASS], buf[ROW_VEL_EXPLICIT]
     for j in range(j0, j1):
         _row_force(j, phys, x1, sin, sout, work, t1, buf, tu, td, TANGENT)
-        nb = j * nx
+        nb = nodes.rows[j, ROW_NODE]
+        nx = nodes.rows[j, ROW_COUNT]
         e = nb + nx
         im = nodes.inv_mass[nb:e]
         m = nodes.mass[nb:e]

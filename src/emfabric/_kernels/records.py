@@ -6,11 +6,18 @@ Adding a field to a record changes the kernels' signatures, so nothing else need
 the compiled code to see it. Units are SI throughout.
 
 Layouts (the only place they are defined):
-- node arrays are component-major, shape (3, node_count): ``x[:, n]`` is node n; node n sits at
-  grid column i = n % nx and row j = n // nx;
-- segments are numbered warp first (s = j·(nx−1) + i joins nodes j·nx + i and j·nx + i + 1), then
-  fill (s = warp_count + j·nx + i joins j·nx + i and (j + 1)·nx + i); ``Yarns.ends`` holds the
-  end nodes of every segment as data;
+- a fabric is a pack of plies, each a regular weave (a grid of nx_p × ny_p nodes, possibly
+  rotated in its plane); ply p owns the nodes ``Nodes.ply_nodes[p]`` ≤ n < ``ply_nodes[p + 1]``,
+  the grid rows ``Nodes.ply_rows[p]`` ≤ j < ``ply_rows[p + 1]`` and the segments
+  ``Yarns.ply_segments[p]`` ≤ s < ``ply_segments[p + 1]``; one sheet is a pack of one ply;
+- node arrays are component-major, shape (3, node_count): ``x[:, n]`` is node n. Row j of the
+  pack (``Nodes.rows[j]``: ROW_NODE, ROW_COUNT, ROW_WARP, ROW_FILL) holds ROW_COUNT nodes from
+  ROW_NODE on; in ply p, node ply_nodes[p] + j·nx_p + i sits at column i and row j of its grid;
+- within a ply, segments are numbered warp first (s = s_p + j·(nx_p−1) + i joins nodes
+  n_p + j·nx_p + i and n_p + j·nx_p + i + 1), then fill (s = s_p + warp_p + j·nx_p + i joins
+  n_p + j·nx_p + i and n_p + (j + 1)·nx_p + i); a row's first warp and fill segment are
+  ROW_WARP and ROW_FILL (−1 on the ply's last row); ``Yarns.ends`` holds the end nodes of every
+  segment as data;
 - the rigid body's state is one (BODY_ROWS, 3) array, rows BODY_X … BODY_M then the rotation
   matrix (body frame → inertial frame) in rows BODY_R0 … BODY_R0 + 2.
 """
@@ -97,11 +104,18 @@ REGION_UNIFORM, REGION_HALF_SPACE = 0, 1
 SHAPE_SPHERE, SHAPE_OGIVE, SHAPE_CYLINDER, SHAPE_FSP = 0, 1, 2, 3
 
 
+ROW_NODE, ROW_COUNT, ROW_WARP, ROW_FILL = 0, 1, 2, 3
+"""Columns of Nodes.rows: a row's first node, its node count, its first warp segment, and its
+first fill segment to the next row of its ply (−1 on a ply's last row)."""
+
+
 class Nodes(NamedTuple):
-    """The fabric's lumped masses on an nx × ny grid."""
+    """The fabric's lumped masses: a pack of plies, each a grid of rows (the layout above)."""
 
     nx: int
+    """The longest row's node count (the row buffers' width)."""
     ny: int
+    """Rows of the whole pack (Σ ny_p)."""
     x0: np.ndarray
     """Reference positions [m], (3, node_count)."""
     mass: np.ndarray
@@ -110,6 +124,12 @@ class Nodes(NamedTuple):
     """1/mass [1/kg], 0 for clamped nodes."""
     charge: np.ndarray
     """[C], (node_count,)."""
+    rows: np.ndarray
+    """(ny, 4) int64: ROW_NODE, ROW_COUNT, ROW_WARP, ROW_FILL of each row."""
+    ply_nodes: np.ndarray
+    """(plies + 1,) int64: ply p's nodes are ply_nodes[p] ≤ n < ply_nodes[p + 1]."""
+    ply_rows: np.ndarray
+    """(plies + 1,) int64: ply p's rows."""
 
 
 class Yarns(NamedTuple):
@@ -126,7 +146,9 @@ class Yarns(NamedTuple):
     modulus: np.ndarray
     """𝔼 (KSV) or c (Fung) of each segment [Pa]."""
     area: float
-    """Undeformed cross-section A0 [m²]."""
+    """Undeformed cross-section A0 [m²] of the first ply (each segment's is stiffness·L0/𝔼)."""
+    ply_segments: np.ndarray
+    """(plies + 1,) int64: ply p's segments are ply_segments[p] ≤ s < ply_segments[p + 1]."""
 
 
 class Material(NamedTuple):
@@ -247,6 +269,21 @@ class Contact(NamedTuple):
     follow: bool = True
     """Put a node in contact where the φ-update with its velocity after contact takes it (else
     at the closest point of its position before contact, the paper as printed)."""
+    ply_gap: np.ndarray = np.zeros(0)
+    """Ply-to-ply contact (emfabric._kernels.plies): the distance [m] below which the mid-planes
+    of plies p and p + 1 are in contact (the sum of their yarn radii), (plies − 1,)."""
+    ply_reach: np.ndarray = np.zeros(0)
+    """The in-plane radius ρ [m] of a node's share of its ply's surface, (plies,)."""
+    ply_box: np.ndarray = np.zeros((0, 2), dtype=np.int64)
+    """The half-widths (columns, rows) of the box of a ply's grid around its node nearest to a
+    node of the other ply that holds every node within ply_reach, (plies, 2) int64."""
+    ply_guess: np.ndarray = np.zeros((2, 0), dtype=np.int64)
+    """For each node, its nearest node in the reference state of the ply above (row 0) and of
+    the ply below (row 1), −1 where there is none, (2, node_count) int64: where the walk to the
+    nearest node starts (a state-free start: a restarted run walks the same way)."""
+    ply_quantum: np.ndarray = np.ones(2)
+    """The units [N s] and [kg m] in which ply contact sums impulses and mass-weighted
+    placements exactly (integers: the sum does not depend on the order), (2,)."""
 
 
 class Solver(NamedTuple):
@@ -402,12 +439,45 @@ class Work(NamedTuple):
     body_scratch: np.ndarray
     """The body update's workspace, (7, 3): rows 0–2 the rotation increment, rows 3–6 the
     inertia solve (vec3.solve3)."""
+    ply_acc: np.ndarray
+    """Ply contact's exact sums per node (int64, in Contact.ply_quantum units): the impulse
+    and the mass-weighted placement, (2, 3, node_count)."""
+    ply_sums: np.ndarray
+    """Ply contact's energy terms of the latest call, (2,): the dissipation and the placement
+    work [J] (plies.ply_contact)."""
 
 
-def make_work(nx: int, ny: int, seg_count: int = 0) -> Work:
-    """The workspace of a step; seg_count: the segments segment contact may touch (0 without
-    segment contact: its arrays are then one element long)."""
-    n = nx * ny
+def pack_tables(grids) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The layout tables of a pack of plies whose grids are `grids` [(nx_p, ny_p), ...] in
+    order: (Nodes.rows, Nodes.ply_nodes, Nodes.ply_rows, Yarns.ply_segments)."""
+    rows = []
+    ply_nodes, ply_rows, ply_segments = [0], [0], [0]
+    for nx, ny in grids:
+        n0, s0 = ply_nodes[-1], ply_segments[-1]
+        warp = ny * (nx - 1)
+        for j in range(ny):
+            rows.append((n0 + j * nx, nx, s0 + j * (nx - 1),
+                         s0 + warp + j * nx if j < ny - 1 else -1))
+        ply_nodes.append(n0 + nx * ny)
+        ply_rows.append(ply_rows[-1] + ny)
+        ply_segments.append(s0 + warp + nx * (ny - 1))
+    return (np.array(rows, dtype=np.int64).reshape(-1, 4), np.array(ply_nodes, dtype=np.int64),
+            np.array(ply_rows, dtype=np.int64), np.array(ply_segments, dtype=np.int64))
+
+
+def grid_nodes(nx: int, ny: int, x0, mass, inv_mass, charge) -> Nodes:
+    """The Nodes record of one nx × ny sheet (a pack of one ply)."""
+    rows, ply_nodes, ply_rows, _ = pack_tables([(nx, ny)])
+    return Nodes(nx, ny, x0, mass, inv_mass, charge, rows, ply_nodes, ply_rows)
+
+
+def make_work(node_count: int, row_count: int, seg_total: int, seg_count: int = 0,
+              plies: int = 1) -> Work:
+    """The workspace of a step: node_count nodes in row_count grid rows, seg_total yarn
+    segments; seg_count: the segments segment contact may touch (0 without segment contact:
+    its arrays are then one element long); plies: 1 leaves ply contact's arrays one node long."""
+    n = node_count
+    ny = row_count
     nmax = n + seg_count
     ns = n if seg_count else 1
     return Work(np.empty((3, n)), np.empty((SUM_ROWS, ny)), np.empty(n), np.empty(n),
@@ -420,5 +490,5 @@ def make_work(nx: int, ny: int, seg_count: int = 0) -> Work:
                 np.empty(nmax, dtype=np.int64), np.empty(nmax, dtype=np.int64),
                 np.empty((2, nmax)), np.empty((3, nmax)), np.empty((3, nmax)),
                 np.empty((3, nmax)), np.zeros((6, n)), np.empty(nmax), np.zeros((2, 3)),
-                np.zeros(ny * (nx - 1) + nx * (ny - 1)),
-                np.full(ny * (nx - 1) + nx * (ny - 1), np.nan), np.zeros((7, 3)))
+                np.zeros(seg_total), np.full(seg_total, np.nan), np.zeros((7, 3)),
+                np.zeros((2, 3, n if plies > 1 else 1), dtype=np.int64), np.zeros(2))

@@ -86,7 +86,6 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
     """
     nodes = phys.nodes
     body = phys.body
-    ny = nodes.ny
     inv_mass = nodes.inv_mass
     phi = solver.phi
     tol = solver.tolerance
@@ -170,21 +169,26 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
             if phys.contact.segments:
                 nc = segment_contact(nodes, phys.yarns, body, phys.contact, b_out, nseg, nc,
                                      cur, v1, work)
-            candidate_errors(nodes.nx, ncand, work.cand, x0, prev, cur, row_sums)
+            candidate_errors(nodes, ncand, work.cand, x0, prev, cur, row_sums)
             reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, imp_force, imp_moment)
             num_b, den_b, body_ok = body_update(body, phys.field, b_in, b_out, t1, phi, dt,
                                                 work.reaction, work.body_scratch, tol)
         # error measure, eq. 3.10 step 5a (fabric), and the same for the body
         num = 0.0
         den = 0.0
-        # rows j and ny−1−j first: a run mirrored in y (B reversed along x) gets the same ϖ
-        # bit for bit, hence the same steps
-        for j in range(ny // 2):
-            num += row_sums[SUM_ERROR_NUM, j] + row_sums[SUM_ERROR_NUM, ny - 1 - j]
-            den += row_sums[SUM_ERROR_DEN, j] + row_sums[SUM_ERROR_DEN, ny - 1 - j]
-        if ny % 2 == 1:
-            num += row_sums[SUM_ERROR_NUM, ny // 2]
-            den += row_sums[SUM_ERROR_DEN, ny // 2]
+        # per ply, its rows j and ny−1−j first: a run mirrored in y (B reversed along x) gets
+        # the same ϖ bit for bit, hence the same steps
+        for p in range(nodes.ply_rows.shape[0] - 1):
+            r0 = nodes.ply_rows[p]
+            ny = nodes.ply_rows[p + 1] - r0
+            for j in range(ny // 2):
+                num += (row_sums[SUM_ERROR_NUM, r0 + j]
+                        + row_sums[SUM_ERROR_NUM, r0 + ny - 1 - j])
+                den += (row_sums[SUM_ERROR_DEN, r0 + j]
+                        + row_sums[SUM_ERROR_DEN, r0 + ny - 1 - j])
+            if ny % 2 == 1:
+                num += row_sums[SUM_ERROR_NUM, r0 + ny // 2]
+                den += row_sums[SUM_ERROR_DEN, r0 + ny // 2]
         err_f = num / den if den > still else (0.0 if num <= still else 1.0)
         err_b = num_b / den_b if den_b > 0.0 else (0.0 if num_b == 0.0 else 1.0)
         err = max(err_f, err_b)

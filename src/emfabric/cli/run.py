@@ -207,7 +207,10 @@ def validate(
     except ScenarioError as err:
         error(str(err))
         raise typer.Exit(2) from None
-    console.print(f"[green]ok[/]: {escape(sc.name)}: {model.nx} x {model.ny} nodes, "
+    grids = [model.ply_grid(p) for p in range(model.ply_count)]
+    pack = (f"{grids[0][0]} x {grids[0][1]} nodes" if len(grids) == 1 else
+            f"{len(grids)} plies, {model.node_count} nodes")
+    console.print(f"[green]ok[/]: {escape(sc.name)}: {pack}, "
                   f"{model.seg_count} yarn segments, projectile: {sc.projectile.shape}")
     if show:
         emit(sc.to_commented_toml())

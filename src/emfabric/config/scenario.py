@@ -102,6 +102,110 @@ class Fabric(_Section):
     """Grid on this sheet that yarn_radius and charge_per_node describe (rescale = true) [-]."""
     material: MaterialSpec = MaterialSpec()
     damage: Damage = Damage()
+    plies: Annotated[int, Field(ge=1, le=64)] = 1
+    """Plies in the pack [-] (default 1: one sheet; with [[fabric.ply]] tables, their count)."""
+    ply_spacing: PositiveFloat | None = None
+    """Distance between neighbouring plies' mid-planes [m]: ply 1 at z = 0, the others below
+    it; default: touching (the sum of their yarn radii)."""
+    ply_angles: tuple[FiniteFloat, ...] = ()
+    """In-plane rotation of each ply's weave [deg], one per ply (default: all 0). A weave at
+    a multiple of 90° is the frame's grid; at any other angle it is the rotated grid clipped
+    to the frame (its nodes on or outside the frame next to the sheet are clamped)."""
+    ply: tuple[PlySpec, ...] = ()
+    """Per-ply overrides ([[fabric.ply]] tables, one per ply, in order from the top): any
+    fabric key that is not the frame's geometry."""
+
+    @model_validator(mode="before")
+    @classmethod
+    def _plies_from_tables(cls, data: Any) -> Any:
+        if isinstance(data, dict) and data.get("ply") and "plies" not in data:
+            data = {**data, "plies": len(data["ply"])}
+        return data
+
+    @model_validator(mode="after")
+    def _ply_lists_match(self) -> Fabric:
+        if self.ply and len(self.ply) != self.plies:
+            raise ValueError(
+                f"{len(self.ply)} [[fabric.ply]] tables for plies = {self.plies}; allowed: one "
+                "table per ply (or none)")
+        if self.ply_angles and len(self.ply_angles) != self.plies:
+            raise ValueError(
+                f"ply_angles has {len(self.ply_angles)} values for plies = {self.plies}; "
+                "allowed: one angle [deg] per ply (or none: all 0)")
+        for i, table in enumerate(self.ply):
+            if table.material is not None and table.material.model not in (
+                    None, self.material.model):
+                raise ValueError(
+                    f"ply[{i}].material.model = {table.material.model!r} differs from "
+                    f"fabric.material.model = {self.material.model!r}; allowed: one yarn law "
+                    "for the whole pack")
+            if table.damage is not None:
+                for key, value in table.damage.model_dump(exclude_none=True).items():
+                    if value != getattr(self.damage, key):
+                        raise ValueError(
+                            f"ply[{i}].damage.{key} = {value} differs from fabric.damage."
+                            f"{key} = {getattr(self.damage, key)}; allowed: one damage law "
+                            "for the whole pack (per-ply damage comes with the material "
+                            "library)")
+        return self
+
+    def ply_fabric(self, index: int) -> Fabric:
+        """The fabric of ply `index` (0 = the top one): this section with that ply's table
+        laid over it."""
+        if not self.ply:
+            return self
+        over = self.ply[index].model_dump(exclude_none=True)
+        base = self.model_dump()
+        for key in ("material", "damage"):
+            if key in over:
+                over[key] = {**base[key], **over[key]}
+        return self.model_copy(update={**{k: (MaterialSpec(**v) if k == "material" else
+                                               Damage(**v) if k == "damage" else v)
+                                            for k, v in over.items()}, "ply": ()})
+
+
+class _MaterialOverride(_Section):
+    model: Literal["kirchhoff-saint-venant", "fung"] | None = None
+    """Must equal fabric.material.model."""
+    youngs_modulus: PositiveFloat | None = None
+    """Mean Young's modulus of this ply's yarns [Pa]."""
+    modulus_cv: NonNegFloat | None = None
+    """Coefficient of variation of this ply's per-yarn modulus."""
+    seed: Annotated[int, Field(ge=0)] | None = None
+    """Seed of this ply's modulus scatter (default: the sequence (seed, ply index))."""
+    c: PositiveFloat | None = None
+    """Fung constant c [Pa]."""
+    H: PositiveFloat | None = None
+    """Fung constant H [-]."""
+
+
+class _DamageOverride(_Section):
+    critical_stretch: Annotated[float, Field(ge=1.0, allow_inf_nan=False)] | None = None
+    """U_crit of eq. 2.6 [-] (must equal the pack's: one damage law per pack for now)."""
+    rate: NonNegFloat | None = None
+    """λ of eq. 2.6 [-] (must equal the pack's)."""
+
+
+class PlySpec(_Section):
+    nodes: tuple[Annotated[int, Field(ge=2)], Annotated[int, Field(ge=2)]] | None = None
+    """This ply's grid nodes along its weave's two directions [-]."""
+    areal_density: PositiveFloat | None = None
+    """[kg/m²]."""
+    yarn_radius: PositiveFloat | None = None
+    """[m]."""
+    charge_per_node: FiniteFloat | None = None
+    """[C]."""
+    velocity: FiniteVec3 | None = None
+    """Initial velocity of this ply's free nodes [m/s]."""
+    rescale: bool | None = None
+    """As fabric.rescale, for this ply."""
+    reference_nodes: tuple[Annotated[int, Field(ge=2)], Annotated[int, Field(ge=2)]] | None = None
+    """As fabric.reference_nodes, for this ply."""
+    material: _MaterialOverride | None = None
+    damage: _DamageOverride | None = None
+
+
+Fabric.model_rebuild()
 
 
 class PointCharge(_Section):
@@ -453,6 +557,18 @@ class Scenario(_Section):
             solver = dict(solver) if isinstance(solver, dict) else {}
             data = {**data, "solver": {**solver, "integrator": "phi"}}
         return data
+
+    @model_validator(mode="after")
+    def _packs_run_explicit(self) -> Scenario:
+        if self.fabric.plies > 1 and self.solver.integrator == "phi":
+            raise ValueError(
+                f"fabric.plies = {self.fabric.plies} with solver.integrator = 'phi': a pack of "
+                "plies runs with central differences only (ply contact is an impulse and a "
+                "placement after each step; inside the φ-scheme's fixed point it breaks the "
+                "iteration, and split from it the energy budget misses tens of J); allowed: "
+                "solver.integrator = 'central-difference' (the default; leave out the "
+                "φ-scheme's keys) or plies = 1")
+        return self
 
     @model_validator(mode="after")
     def _placement_is_phi_only(self) -> Scenario:

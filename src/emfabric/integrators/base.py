@@ -217,10 +217,17 @@ class IntegratorBase(ABC):
         f = np.linalg.norm(s_in.node_f, axis=0)
         node = int(np.argmax(f)) if f.size else -1
         fmax = float(f[node]) if f.size else 0.0
-        i, j = node % self.model.nx, node // self.model.nx
+        where = ""
+        if node >= 0:
+            m = self.model
+            ply = int(np.searchsorted(m.nodes.ply_nodes, node, side="right") - 1)
+            nx = m.ply_grid(ply)[0]
+            local = node - int(m.nodes.ply_nodes[ply])
+            where = (f" (ply {ply + 1}, " if m.ply_count > 1 else " (") + \
+                f"grid i={local % nx}, j={local // nx})"
         raise DivergenceError(
             f"diverged at t = {s_in.t:.6g} s, Δt = {dt:.3g} s: {why}; largest force "
-            f"{fmax:.3g} N on node {node} (grid i={i}, j={j}) at "
+            f"{fmax:.3g} N on node {node}{where} at "
             f"{tuple(round(float(c), 6) for c in s_in.node_x[:, node])} m",
             s_in.t, dt, node, fmax,
         )

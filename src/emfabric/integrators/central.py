@@ -57,8 +57,9 @@ class CentralDifference(IntegratorBase):
         self.courant = opts.courant
         self.dt_max = opts.dt_max
         self.dt_min = opts.dt_min
-        self.work = make_work(model.nx, model.ny,
-                              model.seg_count if model.physics.contact.segments else 0)
+        self.work = make_work(model.node_count, model.ny, model.seg_count,
+                              model.seg_count if model.physics.contact.segments else 0,
+                              model.ply_count)
         self.scratch = np.empty(model.node_count)
         self._step = Direct(central_step)
         self._stable = Direct(stable_step)

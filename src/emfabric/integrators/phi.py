@@ -55,8 +55,9 @@ class Integrator(IntegratorBase):
         # threads pay off on large sheets only; block size fixed, so results never depend on them
         super().__init__(model, threads=threads if threads is not None else (
             n >= THREADS_FROM_NODES and numba.config.NUMBA_NUM_THREADS > 1), adaptive=adaptive)
-        self.work = make_work(model.nx, model.ny,
-                              model.seg_count if model.physics.contact.segments else 0)
+        self.work = make_work(model.node_count, model.ny, model.seg_count,
+                              model.seg_count if model.physics.contact.segments else 0,
+                              model.ply_count)
         solver = model.options
         # None for the plain fixed point: the step kernel is then compiled without Anderson
         self.accel = None

@@ -17,7 +17,7 @@ from emfabric.io.netcdf import (
     write_netcdf,
     xyz_coordinate,
 )
-from emfabric.sim.diagnostics import COLUMNS, LAYOUT, RECORD
+from emfabric.sim.diagnostics import COLUMNS, LAYOUT, PLY_RECORD, RECORD, ply_layout, row_width
 from emfabric.sim.model import Model
 
 VARIABLES = RECORD
@@ -31,10 +31,11 @@ class Recorder:
     """Stores history records (rows filled by emfabric.sim.diagnostics.measure) in a growing array
     (amortised O(1) append); computes nothing."""
 
-    def __init__(self, rows: np.ndarray | None = None) -> None:
-        """rows: records to start from (a resumed run's history so far)."""
+    def __init__(self, rows: np.ndarray | None = None, plies: int = 1) -> None:
+        """rows: records to start from (a resumed run's history so far); plies: the pack's
+        plies (the rows' per-ply columns, diagnostics.row_width)."""
         self.count = 0 if rows is None else rows.shape[0]
-        self._rows = np.empty((max(1024, 2 * self.count), COLUMNS))
+        self._rows = np.empty((max(1024, 2 * self.count), row_width(plies)))
         if rows is not None:
             self._rows[: self.count] = rows
 
@@ -67,6 +68,17 @@ def rows_to_dataset(rows: np.ndarray, attrs: dict[str, str]) -> xr.Dataset:
                 vals = vals.astype(np.int64)
             data[name] = (("time",), vals, meta)
     coords = {"time": ("time", rows[:, 0].copy(), TIME_ATTRS), "xyz": xyz_coordinate()}
+    plies = (rows.shape[1] - COLUMNS) // len(PLY_RECORD)
+    for name, sl in ply_layout(plies).items():
+        units, long_name = PLY_RECORD[name]
+        vals = rows[:, sl].copy()
+        if name != "max_deflection_per_ply":
+            vals = vals.astype(np.int64)
+        data[name] = (("time", "ply"), vals, {"units": units, "long_name": long_name})
+    if plies:
+        coords["ply"] = ("ply", np.arange(1, plies + 1, dtype=np.int32),
+                         {"long_name": "ply, from the top (the side the projectile comes "
+                                       "from)", "units": "1"})
     return xr.Dataset(data, coords=coords, attrs=dict(attrs))
 
 
@@ -108,15 +120,17 @@ def append_history(path: Path, rows: np.ndarray, attrs: dict[str, str], written:
     if rows.shape[0] == 0:
         return written
     ds = rows_to_dataset(rows, {})
-    return append_records(path, "time", {name: ds[name].values for name in ("time", *VARIABLES)})
+    names = ("time", *VARIABLES, *(n for n in PLY_RECORD if n in ds))
+    return append_records(path, "time", {name: ds[name].values for name in names})
 
 
-def read_history_rows(path: Path, count: int) -> np.ndarray:
-    """The first `count` records of history.nc as rows (a resumed run's history so far)."""
+def read_history_rows(path: Path, count: int, plies: int = 1) -> np.ndarray:
+    """The first `count` records of history.nc as rows (a resumed run's history so far) of a
+    pack of `plies` plies."""
     raw = read_records(path, "time", count)
-    rows = np.empty((count, COLUMNS))
+    rows = np.empty((count, row_width(plies)))
     rows[:, 0] = raw["time"]
-    for name, sl in LAYOUT.items():
+    for name, sl in {**LAYOUT, **ply_layout(plies)}.items():
         rows[:, sl] = raw[name].reshape(count, -1)
     return rows
 

@@ -113,7 +113,7 @@ def resume(out_dir: str | Path, scenario: Scenario | None = None, *,
     if status is not None and status[0] == "complete":
         raise CheckpointError(f"the run in {out} is complete ({status[1]}): nothing to resume")
     try:
-        rows = read_history_rows(history, pos.history_rows)
+        rows = read_history_rows(history, pos.history_rows, model.ply_count)
         times = snapshot_times(out / "snapshots.nc", pos.snapshots)
     except (OSError, ValueError, KeyError) as err:
         raise CheckpointError(f"{out}: the history or snapshots written with the checkpoint "
@@ -139,10 +139,10 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
         if out is not None:
             # a readable (empty) history before anything compiles: killed at any moment, the
             # folder says what was run and that it did not finish
-            write_history(Recorder().to_dataset(run_attributes(model, "partial", "starting",
-                                                               0.0)), out / "history.nc")
+            write_history(Recorder(plies=model.ply_count).to_dataset(
+                run_attributes(model, "partial", "starting", 0.0)), out / "history.nc")
         s_in = initial_state(model)
-        recorder = Recorder()
+        recorder = Recorder(plies=model.ply_count)
         snaps = Snapshots(model, out)
         measure(model, s_in, recorder.new_row())
         snaps.take(s_in)
@@ -151,7 +151,7 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
         written = 0
     else:
         pos, rows, times = resumed
-        recorder = Recorder(rows)
+        recorder = Recorder(rows, model.ply_count)
         snaps = Snapshots(model, out, times)
         next_snap = pos.next_snapshot
         wall_before = pos.wall_time

@@ -12,11 +12,11 @@ import numpy as np
 from emfabric.io.history import fabric_reference
 
 
-def perforated(history, status: str, end_reason: str, bound: float) -> int:
-    """1 if the run ended by perforation, or at end_time moving forward, past the sheet's plane
-    (z = 0) by more than the body's bounding radius `bound` and clear of the fabric; 0 if it
-    rebounded, never touched or moves back; -1 undecided (still in contact and moving on at
-    end_time, diverged, failed)."""
+def perforated(history, status: str, end_reason: str, bound: float, back: float = 0.0) -> int:
+    """1 if the run ended by perforation, or at end_time moving forward, past the pack's last
+    plane (z = back; one sheet: z = 0) by more than the body's bounding radius `bound` and
+    clear of the fabric; 0 if it rebounded, never touched or moves back; -1 undecided (still in
+    contact and moving on at end_time, diverged, failed)."""
     ds = history
     if status not in ("complete", "partial"):
         return -1
@@ -24,8 +24,8 @@ def perforated(history, status: str, end_reason: str, bound: float) -> int:
     v0 = ds["projectile_velocity"][0].values
     d = v0 / max(float(np.linalg.norm(v0)), 1e-300)
     forward = float(v @ d)
-    # how far the centre is past the sheet's plane (z = 0), along the flight
-    past = float(ds["projectile_position"][-1].values @ d)
+    # how far the centre is past the pack's last plane, along the flight
+    past = float((ds["projectile_position"][-1].values - np.array([0.0, 0.0, back])) @ d)
     clear = past > bound
     touching = int(ds["contact_nodes"][-1]) > 0
     if end_reason == "perforation":
@@ -37,6 +37,28 @@ def perforated(history, status: str, end_reason: str, bound: float) -> int:
     if not clear and not touching and int(ds["contact_nodes"].max()) == 0:
         return 0  # has not reached the sheet yet
     return -1
+
+
+def plies_perforated(model, state) -> int:
+    """Plies the projectile has passed: its centre beyond, along its flight, every node of the
+    ply still held by an intact yarn (nodes torn loose and carried along do not count) by more
+    than its bounding radius."""
+    d = model.body_v0 / max(float(np.linalg.norm(model.body_v0)), 1e-300)
+    ends = model.yarns.ends
+    intact = state.seg_alpha >= model.material.broken_below
+    intact &= model.yarns.stiffness > 0.0
+    held = np.zeros(model.node_count, dtype=bool)
+    held[ends[intact, 0]] = True
+    held[ends[intact, 1]] = True
+    ahead = (state.node_x - state.body_x[:, None]).T @ d
+    clear = float(model.geometry.bound)
+    count = 0
+    for p in range(model.ply_count):
+        sl = slice(int(model.nodes.ply_nodes[p]), int(model.nodes.ply_nodes[p + 1]))
+        mine = ahead[sl][held[sl]]
+        if mine.size and float(mine.max()) < -clear:
+            count += 1
+    return count
 
 
 def summarize(result) -> dict[str, Any]:
@@ -76,7 +98,10 @@ def summarize(result) -> dict[str, Any]:
             "max_yaw_rad": yaw,
             "energy_absorbed_J": float(ke[0] - ke[-1]),
             "perforated": perforated(ds, result.status, result.end_reason,
-                                     float(m.geometry.bound)),
+                                     float(m.geometry.bound),
+                                     float(m.nodes.x0[2, m.nodes.ply_nodes[-2]])),
+            "plies": m.ply_count,
+            "plies_perforated": plies_perforated(m, st),
         })
     else:
         out.update({"final_omega_rad_s": [math.nan] * 3, "residual_speed_m_s": math.nan,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import os
@@ -15,6 +16,7 @@ from emfabric._kernels.records import (
     BODY_X,
     MATERIAL_FUNG,
     MATERIAL_KSV,
+    ROW_COUNT,
     SHAPE_SPHERE,
     Body,
     Contact,
@@ -22,6 +24,7 @@ from emfabric._kernels.records import (
     Nodes,
     Physics,
     Yarns,
+    pack_tables,
 )
 from emfabric._kernels.shapes import SHAPES
 from emfabric.config.scenario import Scenario, ScenarioError
@@ -47,9 +50,15 @@ the threaded kernel's row buffers and NumPy temporaries while building take the 
 
 
 def memory_needed(scenario: Scenario) -> int:
-    """Bytes a run of this scenario needs (estimate, before anything is allocated)."""
-    nx, ny = scenario.fabric.nodes
-    return BYTES_PER_NODE * nx * ny
+    """Bytes a run of this scenario needs (estimate, before anything is allocated): every ply's
+    grid (a ply at an angle that is not a multiple of 90° is a grid about twice as large)."""
+    fab = scenario.fabric
+    total = 0
+    for p in range(fab.plies):
+        nx, ny = fab.ply_fabric(p).nodes
+        angle = fab.ply_angles[p] if fab.ply_angles else 0.0
+        total += nx * ny * (1 if angle % 90.0 == 0.0 else 2)
+    return BYTES_PER_NODE * total
 
 
 def memory_available() -> int | None:
@@ -105,52 +114,29 @@ def build_model(scenario: Scenario) -> Model:
 def _assemble(scenario: Scenario) -> Model:
     """The Model of a scenario, not yet checked."""
     fab = scenario.fabric
-    nx, ny = fab.nodes
     lx, ly = fab.size
-    n = nx * ny
-    xs, ys = grid_coordinates(nx, lx), grid_coordinates(ny, ly)
-    node_x0 = np.zeros((3, n))
-    node_x0[0] = np.tile(xs, ny)
-    node_x0[1] = np.repeat(ys, nx)
-
-    # lumped mass: total mass / number of nodes (paper 2.2); charge per node (2.5)
-    mass = fab.areal_density * lx * ly / n
-    area = np.pi * fab.yarn_radius**2
-    charge = fab.charge_per_node
-    if fab.rescale:
-        # same fabric at another resolution: stiffness per unit width and q/m kept
-        rnx, rny = fab.reference_nodes
-        ref_h = 0.5 * (lx / (rnx - 1) + ly / (rny - 1))
-        h = 0.5 * (lx / (nx - 1) + ly / (ny - 1))
-        area *= h / ref_h
-        charge *= mass / (fab.areal_density * lx * ly / (rnx * rny))
-    node_mass = np.full(n, mass)
-    node_inv_mass = np.full(n, 1.0 / mass)
-    if fab.edges == "clamped":
-        grid = node_inv_mass.reshape(ny, nx)
-        grid[0, :] = grid[-1, :] = grid[:, 0] = grid[:, -1] = 0.0
-    node_charge = np.full(n, charge)
-
-    # warp (x-neighbours) then fill (y-neighbours)
-    ii, jj = np.meshgrid(np.arange(nx - 1), np.arange(ny), indexing="xy")
-    warp_a = (jj * nx + ii).ravel()
-    ii, jj = np.meshgrid(np.arange(nx), np.arange(ny - 1), indexing="xy")
-    fill_a = (jj * nx + ii).ravel()
-    seg_nodes = np.concatenate(
-        [np.stack([warp_a, warp_a + 1], axis=1), np.stack([fill_a, fill_a + nx], axis=1)]
-    ).astype(np.int64)
-    seg_rest = np.concatenate(
-        [np.full(warp_a.size, lx / (nx - 1)), np.full(fill_a.size, ly / (ny - 1))]
-    )
-
+    plies = [_ply(scenario, p) for p in range(fab.plies)]
+    for p in range(1, fab.plies):
+        touch = plies[p - 1].thickness + plies[p].thickness
+        if fab.ply_spacing is not None and fab.ply_spacing < touch * (1.0 - 1e-12):
+            raise ScenarioError(
+                f"fabric.ply_spacing = {fab.ply_spacing} m: plies {p} and {p + 1} would start "
+                f"interpenetrating (their yarn radii sum to {touch:.4g} m); allowed: a spacing "
+                f"≥ {touch:.4g} m (leave it out for touching plies)")
+    node_x0 = np.concatenate([p.x0 for p in plies], axis=1)
+    node_mass = np.concatenate([p.mass for p in plies])
+    node_inv_mass = np.concatenate([p.inv_mass for p in plies])
+    node_charge = np.concatenate([p.charge for p in plies])
+    node_v0 = np.concatenate([p.v0 for p in plies], axis=1)
+    offsets = np.cumsum([0] + [p.x0.shape[1] for p in plies])
+    seg_nodes = np.concatenate([p.ends + off for p, off in zip(plies, offsets, strict=False)])
+    seg_rest = np.concatenate([p.rest for p in plies])
+    seg_modulus = np.concatenate([p.modulus for p in plies])
+    seg_stiffness = np.concatenate([p.stiffness for p in plies])
+    rows, ply_nodes, ply_rows, ply_segments = pack_tables([p.grid for p in plies])
+    nx = int(rows[:, ROW_COUNT].max())
+    ny = int(rows.shape[0])
     mat = fab.material
-    base = mat.youngs_modulus if mat.model == "kirchhoff-saint-venant" else mat.c
-    seg_modulus = base * _modulus_factors(seg_nodes.shape[0], mat.modulus_cv, mat.seed)
-
-    node_v0 = np.zeros((3, n))
-    free = node_inv_mass > 0
-    node_v0[:, free] = np.asarray(fab.velocity, dtype=float)[:, None]
-
     pr = scenario.projectile
     has_body = pr.shape in SHAPES
     pose = initial_pose(pr)
@@ -162,14 +148,16 @@ def _assemble(scenario: Scenario) -> Model:
         segments = geo.kind != "sphere"
 
     physics = Physics(
-        nodes=Nodes(nx, ny, node_x0, node_mass, node_inv_mass, node_charge),
+        nodes=Nodes(nx, ny, node_x0, node_mass, node_inv_mass, node_charge, rows, ply_nodes,
+                    ply_rows),
         yarns=Yarns(
             ends=seg_nodes,
             rest_length=seg_rest,
             inv_rest2=1.0 / seg_rest**2,
-            stiffness=seg_modulus * area / seg_rest,
+            stiffness=seg_stiffness,
             modulus=seg_modulus,
-            area=float(area),
+            area=float(plies[0].area),
+            ply_segments=ply_segments,
         ),
         material=Material(
             kind=MATERIAL_KSV if mat.model == "kirchhoff-saint-venant" else MATERIAL_FUNG,
@@ -201,7 +189,7 @@ def _assemble(scenario: Scenario) -> Model:
         ),
         contact=Contact(float(scenario.contact.static_friction),
                         float(scenario.contact.dynamic_friction), bool(segments),
-                        scenario.contact.placement == "phi-update"),
+                        scenario.contact.placement == "phi-update", *_ply_contact(plies)),
     )
     model = Model(
         physics=physics,
@@ -216,6 +204,186 @@ def _assemble(scenario: Scenario) -> Model:
         scenario=scenario,
     )
     return model
+
+
+@dataclasses.dataclass
+class _Ply:
+    """One ply's nodes and segments, numbered within the ply (records' layout)."""
+
+    grid: tuple[int, int]
+    x0: np.ndarray
+    mass: np.ndarray
+    inv_mass: np.ndarray
+    charge: np.ndarray
+    v0: np.ndarray
+    ends: np.ndarray
+    rest: np.ndarray
+    modulus: np.ndarray
+    stiffness: np.ndarray
+    area: float
+    thickness: float
+    """The ply's yarn radius as given (its half-thickness for ply contact) [m]."""
+    spacing: tuple[float, float]
+    """Node spacing along its weave's two directions [m]."""
+    cos: float
+    sin: float
+    """The weave's first direction (cos, sin) in the frame."""
+
+
+def ply_z(fab, index: int) -> float:
+    """The mid-plane of ply `index` (0 = the top one, at z = 0) [m]: fabric.ply_spacing apart,
+    or touching (the sum of neighbouring yarn radii)."""
+    z = 0.0
+    for p in range(1, index + 1):
+        z -= (fab.ply_spacing if fab.ply_spacing is not None else
+              fab.ply_fabric(p - 1).yarn_radius + fab.ply_fabric(p).yarn_radius)
+    return z
+
+
+def _ply(scenario: Scenario, index: int) -> _Ply:
+    """Ply `index` of the scenario's pack: its weave's grid, rotated by its angle and clipped to
+    the frame, at its depth."""
+    pack = scenario.fabric
+    fab = pack.ply_fabric(index)
+    lx, ly = pack.size
+    angle = pack.ply_angles[index] if pack.ply_angles else 0.0
+    quarter = angle / 90.0
+    aligned = quarter == round(quarter)
+    nx, ny = fab.nodes
+    hx, hy = lx / (nx - 1), ly / (ny - 1)
+    if aligned:
+        turns = int(round(quarter)) % 4
+        cos, sin = ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0))[turns]
+        su, sv = lx, ly
+        if turns % 2:
+            # the weave's first direction along y: its grid is the frame's, transposed
+            nx, ny, hx, hy, su, sv = ny, nx, hy, hx, ly, lx
+        gx, gy = nx, ny
+        us = grid_coordinates(gx, su)
+        vs = grid_coordinates(gy, sv)
+    else:
+        rad = math.radians(angle)
+        cos, sin = math.cos(rad), math.sin(rad)
+        # the rotated grid that covers the frame, one node beyond it
+        half_u = 0.5 * (lx * abs(cos) + ly * abs(sin))
+        half_v = 0.5 * (lx * abs(sin) + ly * abs(cos))
+        gx = 2 * (int(half_u / hx) + 1) + 1
+        gy = 2 * (int(half_v / hy) + 1) + 1
+        us = grid_coordinates(gx, hx * (gx - 1))
+        vs = grid_coordinates(gy, hy * (gy - 1))
+    n = gx * gy
+    u = np.tile(us, gy)
+    v = np.repeat(vs, gx)
+    x0 = np.zeros((3, n))
+    if aligned and cos == 1.0:
+        x0[0], x0[1] = u, v
+    else:
+        x0[0] = cos * u - sin * v
+        x0[1] = sin * u + cos * v
+    x0[2] = ply_z(pack, index)
+
+    live = np.ones(n, dtype=bool)
+    free = np.ones(n, dtype=bool)
+    if aligned:
+        if pack.edges == "clamped":
+            g = free.reshape(gy, gx)
+            g[0, :] = g[-1, :] = g[:, 0] = g[:, -1] = False
+    else:
+        # clipped to the frame: nodes strictly inside are free; a node next to a free one
+        # (along its yarns) is clamped; the rest carry nothing (no mass, no load)
+        eps = 1e-9 * max(lx, ly)
+        inside = (np.abs(x0[0]) < 0.5 * lx - eps) & (np.abs(x0[1]) < 0.5 * ly - eps)
+        g = inside.reshape(gy, gx)
+        near = g.copy()
+        near[:, 1:] |= g[:, :-1]
+        near[:, :-1] |= g[:, 1:]
+        near[1:, :] |= g[:-1, :]
+        near[:-1, :] |= g[1:, :]
+        if pack.edges == "clamped":
+            live = near.ravel()
+        else:
+            live = inside.copy()
+        free = inside.copy()
+
+    # lumped mass: the ply's mass over its nodes (paper 2.2); charge per node (2.5)
+    count = int(live.sum())
+    mass = fab.areal_density * lx * ly / count
+    area = np.pi * fab.yarn_radius**2
+    charge = fab.charge_per_node
+    if fab.rescale:
+        # same fabric at another resolution: stiffness per unit width and q/m kept
+        rnx, rny = fab.reference_nodes
+        ref_h = 0.5 * (lx / (rnx - 1) + ly / (rny - 1))
+        h = 0.5 * (hx + hy)
+        area *= h / ref_h
+        charge *= mass / (fab.areal_density * lx * ly / (rnx * rny))
+    node_mass = np.where(live, mass, 0.0)
+    node_inv_mass = np.where(free, 1.0 / mass, 0.0)
+    node_charge = np.where(live, charge, 0.0)
+    node_v0 = np.zeros((3, n))
+    node_v0[:, free] = np.asarray(fab.velocity, dtype=float)[:, None]
+
+    # warp (along the weave's first direction) then fill
+    ii, jj = np.meshgrid(np.arange(gx - 1), np.arange(gy), indexing="xy")
+    warp_a = (jj * gx + ii).ravel()
+    ii, jj = np.meshgrid(np.arange(gx), np.arange(gy - 1), indexing="xy")
+    fill_a = (jj * gx + ii).ravel()
+    ends = np.concatenate(
+        [np.stack([warp_a, warp_a + 1], axis=1), np.stack([fill_a, fill_a + gx], axis=1)]
+    ).astype(np.int64)
+    rest = np.concatenate([np.full(warp_a.size, hx), np.full(fill_a.size, hy)])
+    mat = fab.material
+    base = mat.youngs_modulus if mat.model == "kirchhoff-saint-venant" else mat.c
+    own_seed = bool(pack.ply and pack.ply[index].material is not None
+                    and pack.ply[index].material.seed is not None)
+    seed = mat.seed if index == 0 or own_seed else (mat.seed, index)
+    modulus = base * _modulus_factors(ends.shape[0], mat.modulus_cv, seed)
+    stiffness = modulus * area / rest
+    if not aligned:
+        # clipped: a segment carries load where it has a free end (clamped frame) or joins two
+        # nodes of the sheet (free edges)
+        a, b = free[ends[:, 0]], free[ends[:, 1]]
+        stiffness[~((a | b) if pack.edges == "clamped" else (a & b))] = 0.0
+    return _Ply((gx, gy), x0, node_mass, node_inv_mass, node_charge, node_v0, ends, rest,
+                modulus, stiffness, float(area), float(fab.yarn_radius), (hx, hy), cos, sin)
+
+
+def _nearest(master: _Ply, x: np.ndarray) -> np.ndarray:
+    """The node of `master`'s grid nearest to each point x (3, n) in the plane (reference
+    state), numbered within the ply."""
+    gx, gy = master.grid
+    u = master.cos * x[0] + master.sin * x[1]
+    v = -master.sin * x[0] + master.cos * x[1]
+    i = np.clip(np.rint(u / master.spacing[0] + 0.5 * (gx - 1)), 0, gx - 1).astype(np.int64)
+    j = np.clip(np.rint(v / master.spacing[1] + 0.5 * (gy - 1)), 0, gy - 1).astype(np.int64)
+    return j * gx + i
+
+
+def _ply_contact(plies: list[_Ply]):
+    """Contact's ply fields (records.Contact): ply_gap, ply_reach, ply_box, ply_guess,
+    ply_quantum."""
+    gap = np.array([a.thickness + b.thickness for a, b in zip(plies, plies[1:], strict=False)])
+    # a node's share of its ply's surface reaches one spacing (the shares are normalised where
+    # they are used: no bumps where the lattice is sparse or clipped)
+    reach = np.array([max(p.spacing) for p in plies])
+    box = np.array([[int(r / p.spacing[0] + 0.5), int(r / p.spacing[1] + 0.5)]
+                    for p, r in zip(plies, reach, strict=False)], dtype=np.int64).reshape(-1, 2)
+    offsets = np.cumsum([0] + [p.x0.shape[1] for p in plies])
+    guess = np.full((2, int(offsets[-1])), -1, dtype=np.int64)
+    for q in range(len(plies)):
+        if q > 0:
+            guess[0, offsets[q]:offsets[q + 1]] = offsets[q - 1] + _nearest(plies[q - 1],
+                                                                           plies[q].x0)
+        if q < len(plies) - 1:
+            guess[1, offsets[q]:offsets[q + 1]] = offsets[q + 1] + _nearest(plies[q + 1],
+                                                                           plies[q].x0)
+    m = max(float(p.mass.max()) for p in plies)
+    # impulses up to m·1e5 m/s and placements up to m·(gap + reach) in units of 2^-52 of
+    # them: sums of thousands fit an int64
+    span = float(gap.max() + reach.max()) if gap.size else 1.0
+    quantum = np.array([2.0 ** (math.ceil(math.log2(m * 1e5)) - 52),
+                        2.0 ** (math.ceil(math.log2(m * span)) - 52)])
+    return gap, reach, box, guess, quantum
 
 
 def non_finite_part(model: Model) -> str | None:

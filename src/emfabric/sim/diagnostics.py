@@ -80,6 +80,26 @@ LAYOUT: dict[str, slice] = {name: slice(HISTORY_COLUMN[name], HISTORY_COLUMN[nam
                             for name, width in HISTORY_VARIABLES}
 """Columns of each RECORD variable in a history row."""
 
+PLY_RECORD: dict[str, tuple[str, str]] = {
+    "broken_yarns_per_ply": ("1", "yarns of each ply with damage α below "
+                                  "fabric.damage.broken_below"),
+    "max_deflection_per_ply": ("m", "largest out-of-plane node displacement of each ply"),
+    "contact_nodes_per_ply": ("1", "nodes of each ply in contact with the projectile"),
+}
+"""The per-ply history variables (time, ply): name -> (units, long name). A history row holds
+them after the COLUMNS of RECORD, one block of `plies` columns each, in this order."""
+
+
+def row_width(plies: int) -> int:
+    """Columns of a history row of a pack of `plies` plies."""
+    return COLUMNS + len(PLY_RECORD) * plies
+
+
+def ply_layout(plies: int) -> dict[str, slice]:
+    """Columns of each PLY_RECORD variable in a history row of a pack of `plies` plies."""
+    return {name: slice(COLUMNS + k * plies, COLUMNS + (k + 1) * plies)
+            for k, name in enumerate(PLY_RECORD)}
+
 
 class FabricDiagnostics(NamedTuple):
     """The fabric's state in a few numbers (the kernel's order)."""
@@ -130,12 +150,34 @@ def _record(model: Model, state: State, row: np.ndarray,
     e, b = fields_at(model.field, centre.reshape(1, 3), state.t)
     row[COL_FIELD_B:COL_FIELD_B + 3] = b[0]
     row[COL_FIELD_E:COL_FIELD_E + 3] = e[0]
+    _per_ply(model, state, row)
     return FabricDiagnostics._make(out.tolist()), float(e0)
 
 
+def _per_ply(model: Model, state: State, row: np.ndarray) -> None:
+    """The per-ply columns of a history row (PLY_RECORD): one pass of NumPy over the nodes and
+    segments, reduced per ply; a single sheet copies its totals."""
+    plies = model.ply_count
+    lay = ply_layout(plies)
+    if plies == 1:
+        row[lay["broken_yarns_per_ply"]] = row[LAYOUT["broken_yarns"]]
+        row[lay["max_deflection_per_ply"]] = row[LAYOUT["max_deflection"]]
+        row[lay["contact_nodes_per_ply"]] = row[LAYOUT["contact_nodes"]]
+        return
+    nodes, yarns = model.nodes, model.yarns
+    first_node, first_seg = nodes.ply_nodes[:-1], yarns.ply_segments[:-1]
+    broken = state.seg_alpha < model.material.broken_below
+    row[lay["broken_yarns_per_ply"]] = np.add.reduceat(broken.astype(np.int64), first_seg)
+    row[lay["max_deflection_per_ply"]] = np.maximum.reduceat(
+        np.abs(state.node_x[2] - nodes.x0[2]), first_node)
+    touching = state.node_contact[3] != 0.0
+    row[lay["contact_nodes_per_ply"]] = np.add.reduceat(touching.astype(np.int64), first_node)
+
+
+
 def measure(model: Model, state: State, row: np.ndarray) -> FabricDiagnostics:
-    """Fill `row` with the history record of `state` (the order of RECORD) and return the fabric
-    diagnostics it was made from."""
+    """Fill `row` (row_width(model.ply_count) columns) with the history record of `state` (the
+    order of RECORD, then PLY_RECORD) and return the fabric diagnostics it was made from."""
     return _record(model, state, row, state.energy_initial)[0]
 
 

@@ -130,19 +130,36 @@ class Model:
 
     @property
     def nx(self) -> int:
+        """The longest grid row's node count (the row buffers' width)."""
         return self.nodes.nx
 
     @property
     def ny(self) -> int:
+        """Grid rows of the whole pack."""
         return self.nodes.ny
 
     @property
     def node_count(self) -> int:
-        return self.nodes.nx * self.nodes.ny
+        return int(self.nodes.x0.shape[1])
 
     @property
-    def warp_count(self) -> int:
-        return self.ny * (self.nx - 1)
+    def ply_count(self) -> int:
+        return int(self.nodes.ply_nodes.shape[0] - 1)
+
+    def ply_grid(self, ply: int) -> tuple[int, int]:
+        """(nx, ny) of ply `ply`'s grid."""
+        j0, j1 = int(self.nodes.ply_rows[ply]), int(self.nodes.ply_rows[ply + 1])
+        return int(self.nodes.rows[j0, 1]), j1 - j0
+
+    def node_ply(self) -> np.ndarray:
+        """The ply of each node, (node_count,) int32."""
+        return np.repeat(np.arange(self.ply_count, dtype=np.int32),
+                         np.diff(self.nodes.ply_nodes))
+
+    def segment_ply(self) -> np.ndarray:
+        """The ply of each yarn segment, (seg_count,) int32."""
+        return np.repeat(np.arange(self.ply_count, dtype=np.int32),
+                         np.diff(self.yarns.ply_segments))
 
     @property
     def seg_count(self) -> int:

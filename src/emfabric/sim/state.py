@@ -141,7 +141,8 @@ def update_forces(model: Model, state: State) -> None:
     the φ-update with Δt = 0 and φ = 1, and the kernel a default run compiles anyway."""
     m = model
     scratch = state.copy()
-    work = make_work(m.nx, m.ny, m.seg_count if m.physics.contact.segments else 0)
+    work = make_work(m.node_count, m.ny, m.seg_count,
+                     m.seg_count if m.physics.contact.segments else 0, m.ply_count)
     work.flag[:] = 0  # no contact candidates
     fill_node_fields(m.field, state.node_x, state.node_v, 0.0, state.t, work.node_field)
     start = StateArrays(state.node_x, state.node_v, np.zeros_like(state.node_f),

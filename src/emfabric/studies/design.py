@@ -62,7 +62,7 @@ def estimate(scenario: Scenario, tilt: float, by: float) -> Estimate:
         raise ValueError("the scenario has no projectile (projectile.shape = \"none\"): there "
                          "is nothing to tilt")
     fab = scenario.fabric
-    nx, ny = model.nx, model.ny
+    nx, ny = model.ply_grid(0)
     dx = fab.size[0] / (nx - 1)
     dy = fab.size[1] / (ny - 1)
     radius = float(model.body.radius)

@@ -1,0 +1,251 @@
+"""Ply-to-ply contact: neighbouring plies of a pack meet with the stick/slip impulse law of the
+projectile's contact (contact.contact_impulse), both ways, with exact action and reaction.
+
+A node n of ply q meets the surface of its neighbour ply p through the nodes of p nearest to it:
+k0, the nearest node of p (a walk over p's grid from the node k that was nearest in the
+reference state, Contact.ply_guess), and the nodes of p's grid around k0 (Contact.ply_box).
+Each such node k stands for the patch of p's surface around it: its normal N_k (the unit
+t_i × t_j of p's grid, oriented from p towards q), the gap g = (x_n − x_k)·N_k and the in-plane
+distance r² = |x_n − x_k|² − g². Its share of the contact is w_k/Σw with w = (1 − r²/ρ²)² for r
+< ρ (Contact.ply_reach) and |g| < ρ. Where g < Contact.ply_gap (the sum of the two plies' yarn
+radii) and g > −gap, the pair (n, k) with the reduced mass m_nk = 1/(1/m_n + 1/m_k) gets its share
+of the impulse J = contact_impulse(m_nk, v_n, v_k, N_k) (inelastic in N_k, stick or slide in the
+plane) and of the placement that opens the gap to ply_gap: +J on n and −J on k, the placement
+split by the inverse masses (the centre of mass stays). Every node of p meets q and every node
+of q meets p, each pass with half of its share (a node above a node is one pair, seen twice).
+
+All pairs are computed from the same state and their impulses and mass-weighted placements are
+summed per node in integers (units Contact.ply_quantum): the sum does not depend on the order of
+the pairs, so a mirror-symmetric state stays mirror-symmetric to the bit, and the momentum the
+pairs exchange cancels exactly. Only then are they applied (_apply): Δv = ΣJ/m, Δx = Σ(mΔx)/m.
+"""
+
+import math
+
+import numpy as np
+from numba import njit
+
+from emfabric._kernels.contact import contact_impulse
+from emfabric._kernels.records import ROW_COUNT
+
+
+@njit(cache=True)
+def _normals(nodes, ply, x, out):
+    """The unit normal t_i × t_j of ply `ply`'s grid at each of its nodes into out[:, local]
+    (central differences along the grid's rows and columns, one-sided at its edges: the same
+    numbers for mirror-image nodes of a mirror-symmetric state)."""
+    n0 = nodes.ply_nodes[ply]
+    j0 = nodes.ply_rows[ply]
+    nx = nodes.rows[j0, ROW_COUNT]
+    ny = nodes.ply_rows[ply + 1] - j0
+    for j in range(ny):
+        jm = j - 1 if j > 0 else j
+        jp = j + 1 if j < ny - 1 else j
+        for i in range(nx):
+            im = i - 1 if i > 0 else i
+            ip = i + 1 if i < nx - 1 else i
+            a = n0 + j * nx + ip
+            b = n0 + j * nx + im
+            c = n0 + jp * nx + i
+            d = n0 + jm * nx + i
+            ux, uy, uz = x[0, a] - x[0, b], x[1, a] - x[1, b], x[2, a] - x[2, b]
+            wx, wy, wz = x[0, c] - x[0, d], x[1, c] - x[1, d], x[2, c] - x[2, d]
+            nx_ = uy * wz - uz * wy
+            ny_ = uz * wx - ux * wz
+            nz_ = ux * wy - uy * wx
+            size = math.sqrt(nx_ * nx_ + ny_ * ny_ + nz_ * nz_)
+            k = j * nx + i
+            if size > 0.0:
+                out[0, k] = nx_ / size
+                out[1, k] = ny_ / size
+                out[2, k] = nz_ / size
+            else:
+                out[0, k] = 0.0
+                out[1, k] = 0.0
+                out[2, k] = 1.0
+
+
+@njit(cache=True, inline="always")
+def _units(value, quantum):
+    """value/quantum rounded to the nearest integer, halves away from zero (odd: −x gives −n)."""
+    r = math.floor(abs(value) / quantum + 0.5)
+    return np.int64(-r if value < 0.0 else r)
+
+
+@njit(cache=True, inline="always")
+def _dist2(x, a, b):
+    dx = x[0, a] - x[0, b]
+    dy = x[1, a] - x[1, b]
+    dz = x[2, a] - x[2, b]
+    return dx * dx + dy * dy + dz * dz
+
+
+@njit(cache=True)
+def _pass(phys, master, slave, sign, gap, x, v, nrm, acc, guess, shares):
+    """The nodes of ply `slave` against the surface of ply `master` (normals nrm of master's
+    nodes, times sign to point towards slave): impulses and placements into acc (integers).
+    guess: the reference-nearest master node of each node; shares: scratch, (box count,)."""
+    nodes, law = phys.nodes, phys.contact
+    inv_mass, mass = nodes.inv_mass, nodes.mass
+    m0 = nodes.ply_nodes[master]
+    jm = nodes.ply_rows[master]
+    mnx = nodes.rows[jm, ROW_COUNT]
+    mny = nodes.ply_rows[master + 1] - jm
+    rho = law.ply_reach[master]
+    rho2 = rho * rho
+    bi = law.ply_box[master, 0]
+    bj = law.ply_box[master, 1]
+    wide = 2 * bi + 1
+    qi, qx = law.ply_quantum[0], law.ply_quantum[1]
+    for n in range(nodes.ply_nodes[slave], nodes.ply_nodes[slave + 1]):
+        k = guess[n]
+        if k < 0 or mass[n] == 0.0:
+            continue
+        # at rest where it started, and so is its reference neighbour: no contact (the plies
+        # start at least ply_gap apart)
+        if (v[0, n] == 0.0 and v[1, n] == 0.0 and v[2, n] == 0.0 and v[0, k] == 0.0
+                and v[1, k] == 0.0 and v[2, k] == 0.0 and x[0, n] == nodes.x0[0, n]
+                and x[1, n] == nodes.x0[1, n] and x[2, n] == nodes.x0[2, n]
+                and x[0, k] == nodes.x0[0, k] and x[1, k] == nodes.x0[1, k]
+                and x[2, k] == nodes.x0[2, k]):
+            continue
+        # walk over master's grid to its node nearest to n
+        ci = (k - m0) % mnx
+        cj = (k - m0) // mnx
+        best = _dist2(x, n, k)
+        for _step in range(mnx + mny):
+            ni, nj = ci, cj
+            for dj in range(-1, 2):
+                for di in range(-1, 2):
+                    ii = ci + di
+                    jj = cj + dj
+                    if (di == 0 and dj == 0) or ii < 0 or ii >= mnx or jj < 0 or jj >= mny:
+                        continue
+                    d2 = _dist2(x, n, m0 + jj * mnx + ii)
+                    if d2 < best:
+                        best = d2
+                        ni, nj = ii, jj
+            if ni == ci and nj == cj:
+                break
+            ci, cj = ni, nj
+        # the shares w of the master nodes around it, and their sum in mirror-paired order
+        total = 0.0
+        for dj in range(-bj, bj + 1):
+            for di in range(-bi, bi + 1):
+                ii = ci + di
+                jj = cj + dj
+                w = 0.0
+                if 0 <= ii < mnx and 0 <= jj < mny:
+                    km = m0 + jj * mnx + ii
+                    if mass[km] > 0.0:
+                        loc = km - m0
+                        dx = x[0, n] - x[0, km]
+                        dy = x[1, n] - x[1, km]
+                        dz = x[2, n] - x[2, km]
+                        g = sign * ((nrm[0, loc] * dx + nrm[1, loc] * dy) + nrm[2, loc] * dz)
+                        r2 = ((dx * dx + dy * dy) + dz * dz) - g * g
+                        if r2 < rho2 and abs(g) < rho:
+                            q = 1.0 - r2 / rho2
+                            w = q * q
+                shares[(dj + bj) * wide + di + bi] = w
+        for b in range(bj + 1):
+            row = 0.0
+            for jsign in range(2 if b > 0 else 1):
+                jrow = (bj + b if jsign == 0 else bj - b) * wide
+                part = shares[jrow + bi]
+                for a in range(1, bi + 1):
+                    part += shares[jrow + bi - a] + shares[jrow + bi + a]
+                row = part if jsign == 0 else row + part
+            total += row
+        if total == 0.0:
+            continue
+        for dj in range(-bj, bj + 1):
+            for di in range(-bi, bi + 1):
+                w = shares[(dj + bj) * wide + di + bi]
+                if w == 0.0:
+                    continue
+                km = m0 + (cj + dj) * mnx + ci + di
+                inv_sum = inv_mass[n] + inv_mass[km]
+                if inv_sum == 0.0:
+                    continue
+                loc = km - m0
+                nh = (sign * nrm[0, loc], sign * nrm[1, loc], sign * nrm[2, loc])
+                dx = x[0, n] - x[0, km]
+                dy = x[1, n] - x[1, km]
+                dz = x[2, n] - x[2, km]
+                g = (nh[0] * dx + nh[1] * dy) + nh[2] * dz
+                if not (g < gap and g > -gap):
+                    continue
+                share = 0.5 * w / total
+                m_nk = 1.0 / inv_sum
+                j, _slid = contact_impulse(m_nk, (v[0, n], v[1, n], v[2, n]),
+                                           (v[0, km], v[1, km], v[2, km]), nh, law, 0)
+                lift = share * m_nk * (gap - g)
+                for c in range(3):
+                    units = _units(share * j[c], qi)
+                    acc[0, c, n] += units
+                    acc[0, c, km] -= units
+                    units = _units(lift * nh[c], qx)
+                    acc[1, c, n] += units
+                    acc[1, c, km] -= units
+
+
+@njit(cache=True)
+def _apply(nodes, law, x, v, f, acc, lag):
+    """Apply the summed impulses and placements (and clear them). Returns (dissipation [J]:
+    the kinetic energy the impulses took; the work of the force f over the displacement the
+    velocity update does not see, Δx − lag·Δv [J]: the contact placement's term of the energy
+    budget)."""
+    qi, qx = law.ply_quantum[0], law.ply_quantum[1]
+    inv_mass, mass = nodes.inv_mass, nodes.mass
+    lost = 0.0
+    work = 0.0
+    for n in range(x.shape[1]):
+        if (acc[0, 0, n] == 0 and acc[0, 1, n] == 0 and acc[0, 2, n] == 0
+                and acc[1, 0, n] == 0 and acc[1, 1, n] == 0 and acc[1, 2, n] == 0):
+            continue
+        im = inv_mass[n]
+        for c in range(3):
+            dv = float(acc[0, c, n]) * qi * im
+            dx = float(acc[1, c, n]) * qx * im
+            lost -= mass[n] * (v[c, n] * dv + 0.5 * dv * dv)
+            work += f[c, n] * (dx - lag * dv)
+            v[c, n] += dv
+            x[c, n] += dx
+            acc[0, c, n] = 0
+            acc[1, c, n] = 0
+    return lost, work
+
+
+@njit(cache=True)
+def ply_contact(phys, x, v, f, work, lag):
+    """Ply-to-ply contact of every pair of neighbouring plies at positions x and velocities v
+    (changed in place); f: the node forces whose work the placement does, lag: the time over
+    which the scheme's position update sees a velocity change (energy bookkeeping: Δt/2 for
+    central differences). Returns (dissipation [J], placement work [J]),
+    also kept in work.ply_sums; (0, 0) for one ply."""
+    nodes, law = phys.nodes, phys.contact
+    plies = nodes.ply_nodes.shape[0] - 1
+    if plies < 2:
+        work.ply_sums[0] = 0.0
+        work.ply_sums[1] = 0.0
+        return 0.0, 0.0
+    widest = 0
+    box = 1
+    for p in range(plies):
+        widest = max(widest, nodes.ply_nodes[p + 1] - nodes.ply_nodes[p])
+        box = max(box, (2 * law.ply_box[p, 0] + 1) * (2 * law.ply_box[p, 1] + 1))
+    nrm = np.empty((3, widest))
+    shares = np.empty(box)
+    acc = work.ply_acc
+    for p in range(plies - 1):
+        gap = law.ply_gap[p]
+        # ply p + 1's nodes against ply p's underside, then ply p's nodes against ply p + 1
+        _normals(nodes, p, x, nrm)
+        _pass(phys, p, p + 1, -1.0, gap, x, v, nrm, acc, law.ply_guess[0], shares)
+        _normals(nodes, p + 1, x, nrm)
+        _pass(phys, p + 1, p, 1.0, gap, x, v, nrm, acc, law.ply_guess[1], shares)
+    lost, placed = _apply(nodes, law, x, v, f, acc, lag)
+    work.ply_sums[0] = lost
+    work.ply_sums[1] = placed
+    return lost, placed

@@ -1,0 +1,235 @@
+"""Packs of plies (issue 23): the pack as data, ply-to-ply contact, and the physics a pack must
+keep: momentum, mirror symmetry, plies that do not pass through each other, plies that do not
+move before something reaches them, a pack that acts as one thick ply when it sticks together."""
+
+import math
+
+import numpy as np
+import pytest
+import xarray as xr
+from matplotlib.tri import LinearTriInterpolator, Triangulation
+
+from emfabric.config.scenario import ScenarioError, load_scenario
+from emfabric.runner.loop import run
+from emfabric.sim.builder import build_model
+
+from conftest import make
+
+SIZE = 0.1
+NODES = 21
+H = SIZE / (NODES - 1)
+
+
+def _pack(**kw):
+    """A small pack of the paper's fabric (no scatter, no field) under a 1 cm sphere."""
+    return make(**{"fabric.nodes": [NODES, NODES], "fabric.size": [SIZE, SIZE],
+                   "fabric.rescale": False, "fabric.material.modulus_cv": 0.0,
+                   "fabric.plies": 3, "field.B": [0.0, 0.0, 0.0], "projectile.radius": 0.01,
+                   "projectile.mass": 0.01, "projectile.velocity": [0.0, 0.0, -200.0],
+                   "solver.end_time": 40e-6, "output.snapshot_interval": 5e-6, **kw})
+
+
+def test_a_pack_is_plies_of_the_sheet():
+    """Three plies of one sheet: three times its nodes and segments, each ply its own block,
+    ply 1 at z = 0 and the others touching below it (the sum of the yarn radii apart)."""
+    one = build_model(_pack(**{"fabric.plies": 1}))
+    three = build_model(_pack())
+    assert three.node_count == 3 * one.node_count
+    assert three.seg_count == 3 * one.seg_count
+    np.testing.assert_array_equal(three.nodes.ply_nodes, [0, 441, 882, 1323])
+    np.testing.assert_array_equal(three.yarns.ply_segments, np.arange(4) * 2 * 21 * 20)
+    r = 0.000185
+    z = three.nodes.x0[2, three.nodes.ply_nodes[:-1]]
+    np.testing.assert_allclose(z, [0.0, -2 * r, -4 * r], rtol=1e-12)
+    np.testing.assert_array_equal(three.node_ply(), np.repeat([0, 1, 2], 441))
+    # the same sheet in every ply: positions in the plane, masses, stiffness
+    for p in range(3):
+        sl = slice(441 * p, 441 * (p + 1))
+        np.testing.assert_array_equal(three.nodes.x0[:2, sl], one.nodes.x0[:2])
+        np.testing.assert_array_equal(three.nodes.mass[sl], one.nodes.mass)
+    np.testing.assert_allclose(three.contact.ply_gap, [2 * r, 2 * r], rtol=1e-12)
+
+
+def test_ply_tables_override_the_fabric():
+    sc = _pack(**{"fabric.ply": [{"areal_density": 0.2}, {}, {"yarn_radius": 0.0003}]})
+    m = build_model(sc)
+    assert sc.fabric.plies == 3
+    mass = m.nodes.mass
+    assert mass[0] == pytest.approx(0.2 * SIZE**2 / NODES**2, rel=1e-12)
+    assert mass[441] == pytest.approx(0.12784 * SIZE**2 / NODES**2, rel=1e-12)
+    area = m.yarns.stiffness * m.yarns.rest_length / m.yarns.modulus
+    assert area[-1] == pytest.approx(math.pi * 0.0003**2, rel=1e-12)
+    # touching: ply 3 sits r2 + r3 below ply 2
+    z = m.nodes.x0[2, m.nodes.ply_nodes[:-1]]
+    assert z[1] - z[2] == pytest.approx(0.000185 + 0.0003, rel=1e-12)
+
+
+@pytest.mark.parametrize("bad, words", [
+    ({"fabric.ply_angles": [0.0, 45.0]}, "one angle"),
+    ({"fabric.ply": [{}, {}]}, "one table per ply"),
+    ({"fabric.ply_spacing": 1e-4}, "interpenetrating"),
+    ({"solver.integrator": "phi"}, "central differences only"),
+    ({"fabric.ply": [{}, {"damage": {"rate": 5.0}}, {}]}, "one damage law"),
+])
+def test_pack_keys_are_checked(bad, words):
+    with pytest.raises(ScenarioError, match=words):
+        build_model(load_scenario("paper-no-field", {
+            "fabric.plies": 3, "fabric.nodes": [11, 11], **bad}))
+
+
+def test_rotated_ply_is_clipped_to_the_frame():
+    """A ±45° ply: a rotated grid whose nodes strictly inside the frame are free, those next to
+    them clamped and the rest massless; its mass is the ply's, its free nodes fill the frame."""
+    m = build_model(_pack(**{"fabric.ply_angles": [0.0, 45.0, -45.0]}))
+    lo, hi = m.nodes.ply_nodes[1], m.nodes.ply_nodes[2]
+    x0, mass, inv = m.nodes.x0[:, lo:hi], m.nodes.mass[lo:hi], m.nodes.inv_mass[lo:hi]
+    free = inv > 0
+    assert np.all(np.abs(x0[:2, free]) < SIZE / 2)
+    assert mass.sum() == pytest.approx(0.12784 * SIZE**2, rel=1e-12)
+    # the nodes carrying mass reach at most one diagonal spacing beyond the frame
+    assert np.abs(x0[:2, mass > 0]).max() < SIZE / 2 + H * 1.0001
+    # the free nodes' density matches the aligned ply's (one per H²)
+    assert free.sum() == pytest.approx((SIZE / H) ** 2, rel=0.1)
+    # the yarns run at 45°
+    ends = m.yarns.ends[m.yarns.ply_segments[1]]
+    d = m.nodes.x0[:, ends[1]] - m.nodes.x0[:, ends[0]]
+    assert math.degrees(math.atan2(d[1], d[0])) == pytest.approx(45.0, abs=1e-9)
+
+
+def test_free_pack_struck_obliquely_conserves_momentum():
+    """Free edges, no field: a yawed, spinning ogive strikes a free 3-ply pack obliquely and off
+    centre. Projectile contact and ply contact exchange exactly opposite impulses (the ply
+    impulses summed in integers): the momentum of pack + projectile is conserved to
+    round-off, while all three plies take part."""
+    sc = make(**{"fabric.nodes": [15, 15], "fabric.size": [SIZE, SIZE], "fabric.edges": "free",
+                 "fabric.plies": 3, "field.B": [0, 0, 0], "projectile.shape": "ogive",
+                 "projectile.radius": 0.005, "projectile.length": 0.03,
+                 "projectile.nose_length": 0.018, "projectile.mass": 0.01,
+                 "projectile.position": [0.003, -0.002, 0.02],
+                 "projectile.velocity": [30.0, -20.0, -200.0],
+                 "projectile.axis": [0.1, 0.05, -1.0],
+                 "projectile.angular_velocity": [100.0, -300.0, 2000.0],
+                 "solver.end_time": 200e-6})
+    ds = run(sc).history
+    p = ds.fabric_momentum.values + ds.projectile_momentum.values
+    assert int(ds.contact_nodes.max()) >= 5
+    # the bottom ply was pushed through the middle one
+    assert float(ds.max_deflection_per_ply[-1, 2]) > 1e-3
+    assert np.abs(p - p[0]).max() < 1e-13 * np.abs(p[0]).max()
+
+
+def test_head_on_impact_on_an_aligned_pack_does_not_spin():
+    """A sphere head-on into the centre of an aligned pack without scatter: the scene is
+    mirror-symmetric in x and y, and so is every step (mirror-exact forces and normals, ply
+    impulses summed in integers): ω and the lateral position stay exactly zero."""
+    ds = run(_pack()).history
+    assert int(ds.contact_nodes_per_ply[:, 0].max()) >= 4
+    assert float(ds.max_deflection_per_ply[-1, 2]) > 1e-3
+    assert float(np.abs(ds.angular_velocity).max()) == 0.0
+    assert float(np.abs(ds.projectile_position[:, :2]).max()) == 0.0
+
+
+def test_reversing_B_mirrors_a_pack_run():
+    """A yawed ogive into a charged 2-ply pack in B = ±B e_x: the scene is mirror-symmetric in
+    y, so reversing B mirrors the run to the bit (ω_x, ω_z change sign, ω_y does not)."""
+    def go(bx):
+        return run(make(**{
+            "fabric.nodes": [NODES, NODES], "fabric.size": [SIZE, SIZE],
+            "fabric.material.modulus_cv": 0.0, "fabric.plies": 2, "field.B": [bx, 0, 0],
+            "projectile.shape": "ogive", "projectile.radius": 0.005,
+            "projectile.length": 0.03, "projectile.nose_length": 0.018,
+            "projectile.mass": 0.01, "projectile.axis": [0.1, 0.0, -1.0],
+            "projectile.velocity": [20.0, 0.0, -250.0], "solver.end_time": 30e-6})).history
+    a, b = go(0.05), go(-0.05)
+    wa, wb = a.angular_velocity.values, b.angular_velocity.values
+    assert np.abs(wa[:, 0]).max() > 1.0
+    np.testing.assert_array_equal(wb[:, 0], -wa[:, 0])
+    np.testing.assert_array_equal(wb[:, 1], wa[:, 1])
+    np.testing.assert_array_equal(wb[:, 2], -wa[:, 2])
+
+
+SPACED = 0.02
+
+
+def test_a_distant_ply_rests_until_something_reaches_it():
+    """Two plies 2 cm apart, the top one thin and brittle (λ = 500) so that a fast sphere tears
+    it: the lower ply does not move at all (not one node, to the bit) until the top ply has
+    broken or has come down to it."""
+    sc = _pack(**{"fabric.plies": 2, "fabric.ply_spacing": SPACED,
+                  "fabric.ply": [{"yarn_radius": 0.00008}, {}],
+                  "fabric.damage.rate": 500.0, "projectile.velocity": [0, 0, -400.0],
+                  "solver.end_time": 150e-6})
+    ds = run(sc).history
+    moved = ds.max_deflection_per_ply.values[:, 1] > 0.0
+    assert moved.any()
+    reached = ((ds.broken_yarns_per_ply.values[:, 0] > 0)
+               | (ds.max_deflection_per_ply.values[:, 0] >= SPACED - 2 * 0.00008))
+    first = int(np.argmax(moved))
+    assert reached[:first + 1].any()
+    assert not moved[:int(np.argmax(reached))].any()
+
+
+def test_a_stopped_projectile_leaves_lower_plies_undamaged():
+    """A slow sphere that the top ply stops (it rebounds): the plies below, 2 cm away, keep
+    every yarn intact and never move; the summary counts no ply perforated."""
+    sc = _pack(**{"fabric.ply_spacing": SPACED, "projectile.velocity": [0, 0, -60.0],
+                  "solver.end_time": 1.5e-3})
+    res = run(sc)
+    ds = res.history
+    assert res.summary["perforated"] == 0
+    assert res.summary["plies_perforated"] == 0
+    assert int(ds.broken_yarns_per_ply[:, 1:].max()) == 0
+    assert float(ds.max_deflection_per_ply[:, 1:].max()) == 0.0
+    m = res.model
+    assert float(res.state.seg_alpha[m.yarns.ply_segments[1]:].min()) == 1.0
+
+
+def test_plies_in_contact_act_as_one_ply_of_their_sum():
+    """A flat-faced cylinder pushes a pack of two touching plies, and in a second run one ply
+    with their summed mass (areal density) and stiffness (yarn area): the friction of the ply
+    contact makes the pack one sheet, so the projectile's speed and the deflection agree
+    within discretisation error (the plies are 0.37 mm apart, the wave is the same)."""
+    base = {"projectile.shape": "cylinder", "projectile.radius": 0.008,
+            "projectile.length": 0.01, "projectile.mass": 0.02,
+            "projectile.velocity": [0, 0, -100.0], "fabric.damage.rate": 0.0,
+            "solver.end_time": 150e-6}
+    pack = run(_pack(**{**base, "fabric.plies": 2})).history
+    one = run(_pack(**{**base, "fabric.plies": 1, "fabric.areal_density": 2 * 0.12784,
+                       "fabric.yarn_radius": 0.000185 * math.sqrt(2.0)})).history
+    drop_pack = 100.0 + float(pack.projectile_velocity[-1, 2])
+    drop_one = 100.0 + float(one.projectile_velocity[-1, 2])
+    assert drop_one > 10.0
+    assert drop_pack == pytest.approx(drop_one, rel=0.03)
+    assert float(pack.max_deflection[-1]) == pytest.approx(float(one.max_deflection[-1]),
+                                                            rel=0.03)
+
+
+def test_no_ply_passes_through_the_one_above(tmp_path):
+    """A hard impact (400 m/s, no damage) on three touching plies: at every snapshot every node
+    of ply k + 1 lies below the surface of ply k (its position interpolated on ply k's current
+    triangulated surface)."""
+    out = tmp_path / "run"
+    run(_pack(**{"fabric.damage.rate": 0.0, "projectile.velocity": [0, 0, -400.0],
+                 "solver.end_time": 60e-6}), out)
+    snaps = xr.open_dataset(out / "snapshots.nc")
+    ply = snaps.node_ply.values
+    x = snaps.node_position.values
+    tri = None
+    checked = 0
+    for s in range(x.shape[0]):
+        for k in range(2):
+            upper, lower = x[s][ply == k], x[s][ply == k + 1]
+            if tri is None:
+                n = NODES
+                i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1))
+                a = (j * n + i).ravel()
+                tri = np.concatenate([np.stack([a, a + 1, a + n + 1], 1),
+                                      np.stack([a, a + n + 1, a + n], 1)])
+            surf = LinearTriInterpolator(Triangulation(upper[:, 0], upper[:, 1], tri),
+                                         upper[:, 2])
+            z = surf(lower[:, 0], lower[:, 1])
+            inside = ~np.ma.getmaskarray(z)
+            assert np.all(lower[inside, 2] < np.asarray(z)[inside])
+            checked += int(inside.sum())
+    assert checked > 1000
+    assert float(x[-1][:, :, 2].min() if x.ndim == 4 else x[-1][:, 2].min()) < -5e-3
