@@ -7,6 +7,8 @@
 (d) memory per node and peak resident memory;
 (e) the spin's error at the default settings against a converged run (paper-field by default);
 (f) a struck 1000×1000 sheet: time per step, Δt, memory; (g) whole-run cost against the grid.
+``--packs`` instead runs (j): packs of 1, 4 and 16 plies of 100×100, time per simulated µs
+with and without ply contact, memory per node.
 ``--schemes`` instead weighs solver settings on paper-field against (e)'s converged run.
 """
 
@@ -871,6 +873,59 @@ def print_loaded(rows: list[dict], busy: int) -> None:
 
 # --- (f) a large struck sheet, and the cost of a run against the grid ---------------------
 
+# --- (j) packs of plies ----------------------------------------------------------------------
+
+PACK_PLIES = (1, 4, 16)
+PACK_END = 20e-6  # [s]: 19.6 µs of contact (the sphere touches at 0.4 µs)
+
+
+def child_pack(plies: int, end_time: float) -> dict:
+    """In a fresh interpreter: pack-no-field with `plies` plies of 100×100 to end_time, one
+    thread, warm (a first short run compiles); the wall time with and without ply contact
+    (the same run with the plies 10 cm apart: nothing reaches ply 2 within end_time, and the
+    early exit of ply contact for plies at rest is then all it costs), peak memory."""
+    from emfabric import load_scenario
+    from emfabric import run as run_scenario
+
+    over = {"fabric.plies": plies}
+    run_scenario(load_scenario("pack-no-field", {**over, "solver.end_time": 2e-7}), threads=1)
+    rss0 = peak_rss()
+    out = {"plies": plies}
+    for label, extra in (("contact", {}), ("apart", {"fabric.ply_spacing": 0.1})):
+        if plies == 1 and label == "apart":
+            continue
+        t0 = time.perf_counter()
+        res = run_scenario(load_scenario("pack-no-field", {**over, **extra,
+                                                           "solver.end_time": end_time}),
+                           threads=1)
+        out[label] = time.perf_counter() - t0
+        out["steps"] = res.summary["steps"]
+        out["nodes"] = res.model.node_count
+    out["rss"] = peak_rss()
+    out["rss_warm"] = rss0
+    return out
+
+
+def bench_packs(plies: list[int], end_time: float) -> list[dict]:
+    return [child("pack", str(k), repr(end_time)) for k in plies]
+
+
+def print_packs(rows: list[dict], end_time: float) -> None:
+    say(f"(j) Packs of 100×100 plies of the paper's sheet struck by its sphere (pack-no-field), "
+        f"one thread, warm, to {end_time * 1e6:g} µs")
+    say(f"    {'plies':>5} {'nodes':>7} {'steps':>6} {'s/µs':>7} {'÷ plies×1 ply':>13} "
+        f"{'no ply contact s/µs':>19} {'peak MB':>8} {'B/node':>7}")
+    one = next((r for r in rows if r["plies"] == 1), None)
+    for r in rows:
+        per_us = r["contact"] / (end_time * 1e6)
+        ratio = (f"{r['contact'] / (r['plies'] * one['contact']):.2f}" if one else "-")
+        apart = f"{r['apart'] / (end_time * 1e6):.3f}" if "apart" in r else "-"
+        say(f"    {r['plies']:>5} {r['nodes']:>7} {r['steps']:>6} {per_us:>7.3f} {ratio:>13} "
+            f"{apart:>19} {r['rss'] / 2**20:>8.0f} {r['rss'] / r['nodes']:>7.0f}")
+    say("    ÷ plies×1 ply: the pack's wall over plies × one ply's (target: about 1 plus the ply "
+        "contact)")
+
+
 def bench_large(n: int, after_contact: float) -> dict:
     """In a fresh interpreter: paper-field on an n×n sheet from the start until `after_contact`
     seconds after the first contact; the steps after the first contact are timed (the
@@ -1179,6 +1234,10 @@ def main(argv: list[str] | None = None) -> None:
                    help="(g): whole runs measured up to this grid, projected above")
     p.add_argument("--cost-sizes", type=int, nargs="+", default=[40, 70, 100, 200, 400],
                    help="(g): grid sizes besides --large (≤ 100: whole runs)")
+    p.add_argument("--packs", type=int, nargs="*", default=None, metavar="PLIES",
+                   help="only (j): packs of these many 100×100 plies (default 1 4 16)")
+    p.add_argument("--pack-end", type=float, default=PACK_END, metavar="SECONDS",
+                   help="(j): simulated time of each pack run")
     p.add_argument("--child", nargs="+", help=argparse.SUPPRESS)
     a = p.parse_args(argv)
 
@@ -1186,6 +1245,8 @@ def main(argv: list[str] | None = None) -> None:
         mode, *rest = a.child
         if mode == "large":
             out = bench_large(int(rest[0]), float(rest[1]))
+        elif mode == "pack":
+            out = child_pack(int(rest[0]), float(rest[1]))
         else:
             out = (child_startup() if mode == "startup" else
                    child_threads(int(rest[0]), float(rest[1]), int(rest[2]))
@@ -1201,6 +1262,10 @@ def main(argv: list[str] | None = None) -> None:
         say(f"  {line}")
     say()
     base = {} if a.end_time is None else {"solver.end_time": a.end_time}
+    if a.packs is not None:
+        print_packs(bench_packs(a.packs or list(PACK_PLIES), a.pack_end), a.pack_end)
+        say(f"Other processes used {other_cpu(cpu0):.2f} cores on average while this ran")
+        return
     if a.fields:
         bench_fields(a.repeat, a.runs)
         say(f"Other processes used {other_cpu(cpu0):.2f} cores on average while this ran")

@@ -103,7 +103,8 @@ class Fabric(_Section):
     material: MaterialSpec = MaterialSpec()
     damage: Damage = Damage()
     plies: Annotated[int, Field(ge=1, le=64)] = 1
-    """Plies in the pack [-] (default 1: one sheet; with [[fabric.ply]] tables, their count)."""
+    """Plies in the pack [-] (default 1: one sheet; not given, as many as [[fabric.ply]]
+    tables, else as ply_angles)."""
     ply_spacing: PositiveFloat | None = None
     """Distance between neighbouring plies' mid-planes [m]: ply 1 at z = 0, the others below
     it; default: touching (the sum of their yarn radii)."""
@@ -118,8 +119,11 @@ class Fabric(_Section):
     @model_validator(mode="before")
     @classmethod
     def _plies_from_tables(cls, data: Any) -> Any:
-        if isinstance(data, dict) and data.get("ply") and "plies" not in data:
-            data = {**data, "plies": len(data["ply"])}
+        # plies not given: as many as [[fabric.ply]] tables, else as ply_angles
+        if isinstance(data, dict) and "plies" not in data:
+            for key in ("ply", "ply_angles"):
+                if isinstance(data.get(key), list | tuple) and data[key]:
+                    return {**data, "plies": len(data[key])}
         return data
 
     @model_validator(mode="after")
@@ -127,11 +131,13 @@ class Fabric(_Section):
         if self.ply and len(self.ply) != self.plies:
             raise ValueError(
                 f"{len(self.ply)} [[fabric.ply]] tables for plies = {self.plies}; allowed: one "
-                "table per ply (or none)")
+                f"table per ply (or none): set plies = {len(self.ply)} or give {self.plies} "
+                "table(s)")
         if self.ply_angles and len(self.ply_angles) != self.plies:
             raise ValueError(
                 f"ply_angles has {len(self.ply_angles)} values for plies = {self.plies}; "
-                "allowed: one angle [deg] per ply (or none: all 0)")
+                f"allowed: one angle [deg] per ply (or none: all 0): set plies = "
+                f"{len(self.ply_angles)} or give {self.plies} angle(s)")
         for i, table in enumerate(self.ply):
             if table.material is not None and table.material.model not in (
                     None, self.material.model):

@@ -2,6 +2,18 @@
 
 Written twice over: ``snapshots.nc`` (xarray-readable, what the plotting code reads) and a
 ParaView time series ``fabric.pvd`` + ``projectile.pvd`` over ``vtk/*.vtu`` files.
+
+A pack of plies: snapshots.nc holds every node and segment of every ply, with `node_ply` and
+`segment_ply` (0-based, like the node indices of `segment_nodes`: 0 is ply 1, the top one at
+z = 0), `node_carries_load` and `segment_carries_load` (0 for the parts of a rotated ply,
+clipped to the frame, that carry nothing: nodes of mass 0, segments of stiffness 0), and the
+attributes `plies`, `ply_grid_nx`, `ply_grid_ny` (each ply's grid; a ply's nodes are
+consecutive, in row-major order of its grid). `grid_nx`, `grid_ny` are ply 1's grid.
+
+The fabric's .vtu files leave out what carries nothing (renumbering the points): they hold
+the point arrays "ply" (1-based: 1 is the top ply), "node_index" (the node's index in
+snapshots.nc), "velocity", "displacement", and the cell arrays "ply" (1-based),
+"segment_index" (the segment's index in snapshots.nc), "damage".
 """
 
 from __future__ import annotations
@@ -37,6 +49,17 @@ class Snapshots:
         self.times: list[float] = list(times or [])
         self.written = len(self.times)
         self._pending: list[tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
+        # the fabric's .vtu: the nodes and segments that carry load, points renumbered
+        self._vtk_segments = np.flatnonzero(model.yarns.stiffness != 0)
+        ends = model.yarns.ends[self._vtk_segments]
+        keep = model.nodes.mass != 0
+        keep[ends.ravel()] = True  # a point a shown segment ends on is always shown
+        self._vtk_nodes = np.flatnonzero(keep)
+        renumber = np.full(model.node_count, -1, dtype=np.int64)
+        renumber[self._vtk_nodes] = np.arange(self._vtk_nodes.size)
+        self._vtk_cells = renumber[ends]
+        self._vtk_node_ply = (model.node_ply()[self._vtk_nodes] + 1).astype(np.int32)
+        self._vtk_segment_ply = (model.segment_ply()[self._vtk_segments] + 1).astype(np.int32)
         # the projectile's surface in the body frame (its frame at t = 0)
         self._surface = None
         if model.has_body:
@@ -86,6 +109,21 @@ class Snapshots:
                                    "long_name": "node indices of each yarn segment"}),
                 "reference_position": (("node", "xyz"), m.nodes.x0.T,
                                        {"units": "m", "long_name": "node position at t = 0"}),
+                "node_ply": (("node",), m.node_ply().astype(np.int32),
+                             {"units": "1", "long_name": "ply of each node "
+                              "(0-based: 0 is ply 1, the top one at z = 0)"}),
+                "segment_ply": (("segment",), m.segment_ply().astype(np.int32),
+                                {"units": "1", "long_name": "ply of each yarn segment "
+                                 "(0-based: 0 is ply 1, the top one at z = 0)"}),
+                "node_carries_load": (("node",), (m.nodes.mass != 0).astype(np.int32),
+                                      {"units": "1", "long_name":
+                                       "1 for a node of the sheet, 0 for a node of a clipped "
+                                       "ply outside the frame (mass 0, carries nothing)"}),
+                "segment_carries_load": (("segment",),
+                                         (m.yarns.stiffness != 0).astype(np.int32),
+                                         {"units": "1", "long_name":
+                                          "1 for a yarn segment of the sheet, 0 for one of a "
+                                          "clipped ply that carries nothing (stiffness 0)"}),
                 "projectile_nose_body": (("xyz",), m.body.nose,
                                          {"units": "m", "long_name": "nose marker, body frame"}),
                 **self._surface_variables(),
@@ -94,7 +132,7 @@ class Snapshots:
                 "time": ("snapshot", times, TIME_ATTRS),
                 "xyz": xyz_coordinate(),
             },
-            attrs={**attrs, "grid_nx": m.nx, "grid_ny": m.ny,
+            attrs={**attrs, **ply_attributes(m),
                    "projectile_radius": m.body.radius if m.has_body else 0.0,
                    "projectile_shape": m.projectile_shape,
                    "projectile_size": m.geometry.bound if m.has_body else 0.0,
@@ -141,11 +179,16 @@ class Snapshots:
         folder = self.out_dir / "vtk"
         folder.mkdir(parents=True, exist_ok=True)
         _t, x, v, alpha, b = snap
+        nodes, segments = self._vtk_nodes, self._vtk_segments
         mesh = meshio.Mesh(
-            points=x,
-            cells=[("line", m.yarns.ends)],
-            point_data={"velocity": v, "displacement": x - m.nodes.x0.T},
-            cell_data={"damage": [alpha]},
+            points=x[nodes],
+            cells=[("line", self._vtk_cells)],
+            point_data={"velocity": v[nodes], "displacement": (x - m.nodes.x0.T)[nodes],
+                        "ply": self._vtk_node_ply,
+                        "node_index": nodes.astype(np.int32)},
+            cell_data={"damage": [alpha[segments]],
+                       "ply": [self._vtk_segment_ply],
+                       "segment_index": [segments.astype(np.int32)]},
         )
         write_atomic(folder / f"fabric_{k:05d}.vtu", lambda tmp: meshio.write(
             tmp, mesh, file_format="vtu", binary=True, compression=None))
@@ -175,6 +218,15 @@ class Snapshots:
         lines += ["  </Collection>", "</VTKFile>", ""]
         text = "\n".join(lines)
         write_atomic(self.out_dir / f"{stem}.pvd", lambda tmp: tmp.write_text(text))
+
+
+def ply_attributes(model: Model) -> dict[str, object]:
+    """snapshots.nc's grid attributes: `plies`, each ply's grid (`ply_grid_nx`, `ply_grid_ny`,
+    int32 arrays) and ply 1's as `grid_nx`, `grid_ny` (the one grid of a single sheet)."""
+    grids = np.array([model.ply_grid(p) for p in range(model.ply_count)], dtype=np.int32)
+    return {"plies": np.int32(model.ply_count),
+            "grid_nx": np.int32(grids[0, 0]), "grid_ny": np.int32(grids[0, 1]),
+            "ply_grid_nx": grids[:, 0], "ply_grid_ny": grids[:, 1]}
 
 
 def snapshot_times(path: Path, count: int) -> list[float]:

@@ -56,6 +56,8 @@ METRICS: dict[str, tuple[str, str]] = {
                         "past the sheet's plane and clear of the fabric), 0 if it rebounded, "
                         "stopped or never reached the sheet, -1 undecided (still in contact "
                         "at end_time, diverged, failed)"),
+    "plies_perforated": ("1", "plies of the pack the projectile has passed (every node of the "
+                              "ply still held by an intact yarn behind it), -1 failed"),
     "max_tilt": ("rad", "largest angle of the projectile's axis from its initial direction"),
     "max_yaw": ("rad", "largest angle between the projectile's axis and its velocity"),
     "final_angular_velocity": ("rad s-1", "angular velocity of the projectile at the end"),
@@ -214,6 +216,7 @@ def run_case(text: str, out: str | None, threads: int) -> dict[str, Any]:
 def _failed(message: str, wall: float) -> dict[str, Any]:
     out: dict[str, Any] = {k: math.nan for k in METRICS}
     out.update(final_angular_velocity=[math.nan] * 3, perforated=-1, broken_yarns=-1,
+               plies_perforated=-1,
                status="failed", message=message, wall_time=wall)
     return out
 
@@ -228,6 +231,7 @@ def metrics_of(result) -> dict[str, Any]:
         "broken_yarns": s["broken_yarns"],
         "max_deflection": s["max_deflection_m"],
         "perforated": s["perforated"],
+        "plies_perforated": s.get("plies_perforated", -1),
         "residual_speed": s["residual_speed_m_s"],
         "max_tilt": s["max_tilt_rad"],
         "max_yaw": s["max_yaw_rad"],
@@ -378,6 +382,7 @@ def collect(plan: Plan, out: Path) -> tuple[Path, int]:
     shape = tuple(len(plan.coords[d]) for d in plan.dims)
     data: dict[str, np.ndarray] = {k: np.full(shape, np.nan) for k in METRICS}
     data["perforated"] = np.full(shape, -1, dtype=np.int8)
+    data["plies_perforated"] = np.full(shape, -1, dtype=np.int64)
     data["broken_yarns"] = np.full(shape, -1, dtype=np.int64)
     data["status"] = np.full(shape, "missing", dtype=object)
     data["message"] = np.full(shape, "", dtype=object)

@@ -22,14 +22,17 @@ from matplotlib.colors import Normalize
 from emfabric.io.atomic import atomic_path
 from emfabric.viz.plots import (
     STYLE,
+    SectionView,
     SheetView,
     damage_colourbar,
     damage_range,
     new_figure,
     open_history,
     open_snapshots,
+    ply_count,
     run_name,
     scene_limits,
+    shown_segments,
     snapshot_tilt_deg,
     status_note,
     yarn_linewidth,
@@ -42,10 +45,12 @@ FRAME_SIZE = (960, 720)
 
 
 def damage_range_all(snapshots: xr.Dataset) -> tuple[float, float]:
-    """Colour range of α over every snapshot of the run, read one snapshot at a time."""
+    """Colour range of α over every snapshot of the run (the yarns drawn), read one snapshot at
+    a time."""
     alpha = snapshots["yarn_damage"]
-    lo = min(float(alpha[k].min()) for k in range(alpha.shape[0]))
-    hi = max(float(alpha[k].max()) for k in range(alpha.shape[0]))
+    shown = shown_segments(snapshots)
+    lo = min(float(alpha[k].values[shown].min()) for k in range(alpha.shape[0]))
+    hi = max(float(alpha[k].values[shown].max()) for k in range(alpha.shape[0]))
     return damage_range(np.array([lo, hi]))
 
 
@@ -54,7 +59,8 @@ def render_frames(snapshots: xr.Dataset, history: xr.Dataset | None = None,
     """Yield one RGB frame (uint8, shape (height, width, 3)) per snapshot, rendered lazily.
 
     The colour range is the damage range over the whole run (fixed for the movie); the title
-    carries the time and the tilt Θ, and the run's status when it did not complete.
+    carries the time and the tilt Θ, and the run's status when it did not complete. A pack of
+    plies: the 3-D view is shortened and the plies' section (``SectionView``) runs under it.
     """
     count = snapshots.sizes["snapshot"]
     meta = history if history is not None else snapshots
@@ -65,7 +71,12 @@ def render_frames(snapshots: xr.Dataset, history: xr.Dataset | None = None,
     with matplotlib.rc_context(STYLE):
         fig = new_figure((size[0] / dpi, size[1] / dpi), layout=None)
         fig.set_dpi(dpi)
-        ax = fig.add_axes((-0.06, -0.06, 0.9, 1.0), projection="3d")
+        section = None
+        if ply_count(snapshots) > 1:
+            ax = fig.add_axes((-0.06, 0.17, 0.9, 0.83), projection="3d")
+            section = SectionView(fig.add_axes((0.08, 0.07, 0.68, 0.16)), snapshots)
+        else:
+            ax = fig.add_axes((-0.06, -0.06, 0.9, 1.0), projection="3d")
         view = SheetView(ax, snapshots, norm, limits,
                          linewidth=yarn_linewidth(snapshots, scale=1.3))
         damage_colourbar(fig, norm, fig.add_axes((0.81, 0.2, 0.02, 0.6)))
@@ -77,6 +88,8 @@ def render_frames(snapshots: xr.Dataset, history: xr.Dataset | None = None,
         # the style is entered per frame, never held across a yield
         with matplotlib.rc_context(STYLE):
             view.update(snapshots, k)
+            if section is not None:
+                section.update(snapshots, k)
             title.set_text(text + (f"\n({note})" if note else ""))
             fig.canvas.draw()
         frame = np.asarray(fig.canvas.buffer_rgba())[..., :3]

@@ -5,6 +5,11 @@ it works anywhere the output files are. Figures are ``matplotlib.figure.Figure``
 Agg canvas (no pyplot, no display): build them with the ``*_figure`` functions, or let
 ``plot_runs`` build and save them all. Times are drawn in µs, angles in degrees, everything
 else in SI units.
+
+A pack of plies (snapshots.nc's `plies` > 1): the 3-D views draw every ply's yarns (the top
+ply over the deeper ones; the parts of a clipped rotated ply that carry nothing are left
+out), and each view gets a section under it: z of each ply's nodes along x through the impact
+point, a colour per ply. A single sheet's figures are drawn as before.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.cm import ScalarMappable
 from matplotlib.colors import Normalize
 from matplotlib.figure import Figure
+from matplotlib.gridspec import GridSpec
 from matplotlib.lines import Line2D
 from matplotlib.ticker import MaxNLocator
 from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
@@ -427,6 +433,33 @@ def pick_snapshots(times: np.ndarray, count: int = 6) -> np.ndarray:
     return np.unique([int(np.argmin(np.abs(times - t))) for t in targets])
 
 
+def ply_count(snapshots: xr.Dataset) -> int:
+    """The plies of the run's fabric (1 for a file written before packs)."""
+    return int(snapshots.attrs.get("plies", 1))
+
+
+def shown_nodes(snapshots: xr.Dataset) -> np.ndarray:
+    """Indices of the nodes drawn: those that carry load (every node of a file without
+    `node_carries_load`)."""
+    if "node_carries_load" in snapshots:
+        return np.flatnonzero(snapshots["node_carries_load"].values != 0)
+    return np.arange(snapshots.sizes["node"])
+
+
+def shown_segments(snapshots: xr.Dataset) -> np.ndarray:
+    """Indices of the yarn segments drawn, in drawing order: those that carry load (all, in a
+    file without `segment_carries_load`), the deepest ply's first, so that the top ply is
+    drawn over the others (a single sheet: every segment, in order)."""
+    if "segment_carries_load" in snapshots:
+        idx = np.flatnonzero(snapshots["segment_carries_load"].values != 0)
+    else:
+        idx = np.arange(snapshots.sizes["segment"])
+    if "segment_ply" in snapshots:
+        ply = snapshots["segment_ply"].values[idx]
+        idx = idx[np.argsort(-ply, kind="stable")]
+    return idx
+
+
 def damage_range(alpha: np.ndarray) -> tuple[float, float]:
     """Colour range (α_min, α_max) of the yarns shown; (α_max − FLAT_RANGE, α_max) if all equal."""
     lo, hi = float(np.min(alpha)), float(np.max(alpha))
@@ -436,12 +469,14 @@ def damage_range(alpha: np.ndarray) -> tuple[float, float]:
 def scene_limits(snapshots: xr.Dataset, indices: Sequence[int]) -> np.ndarray:
     """Axis limits [m], shape (3, 2), holding the sheet and the projectile at ``indices``.
 
-    Reads one snapshot at a time, so a long run is never loaded whole.
+    Reads one snapshot at a time, so a long run is never loaded whole. Nodes that carry
+    nothing (a clipped ply's outside the frame) are left out.
     """
-    ref = snapshots["reference_position"].values
+    shown = shown_nodes(snapshots)
+    ref = snapshots["reference_position"].values[shown]
     lo, hi = ref.min(axis=0), ref.max(axis=0)
     for k in indices:
-        x = snapshots["node_position"][int(k)].values
+        x = snapshots["node_position"][int(k)].values[shown]
         lo, hi = np.minimum(lo, x.min(axis=0)), np.maximum(hi, x.max(axis=0))
     radius = float(snapshots.attrs.get("projectile_size",
                                        snapshots.attrs.get("projectile_radius", 0.0)))
@@ -473,14 +508,16 @@ def _unit_sphere(n_lat: int = 9, n_lon: int = 17) -> np.ndarray:
 
 
 class SheetView:
-    """One 3-D view: yarns as line segments coloured by damage α, the projectile as its real
-    surface (a wireframe sphere, or the triangulated ogive, cylinder or FSP of the run's
-    snapshots.nc), turning with the body, and an arrow from its centre along the nose."""
+    """One 3-D view: yarns as line segments coloured by damage α (every ply of a pack, the top
+    one drawn last; what carries nothing left out), the projectile as its real surface (a
+    wireframe sphere, or the triangulated ogive, cylinder or FSP of the run's snapshots.nc),
+    turning with the body, and an arrow from its centre along the nose."""
 
     def __init__(self, ax, snapshots: xr.Dataset, norm: Normalize, limits: np.ndarray, *,
                  linewidth: float | None = None, elev: float = 22.0, azim: float = -60.0):
         self.ax = ax
-        self.seg = snapshots["segment_nodes"].values.astype(np.int64)
+        self.shown = shown_segments(snapshots)
+        self.seg = snapshots["segment_nodes"].values.astype(np.int64)[self.shown]
         self.radius = float(snapshots.attrs.get("projectile_radius", 0.0))
         if not int(snapshots.attrs.get("has_projectile", 1)):
             self.radius = 0.0
@@ -514,7 +551,7 @@ class SheetView:
         """Show snapshot ``k`` (reads only that snapshot)."""
         x = snapshots["node_position"][k].values
         self.lines.set_segments(x[self.seg])
-        self.lines.set_array(snapshots["yarn_damage"][k].values)
+        self.lines.set_array(snapshots["yarn_damage"][k].values[self.shown])
         for artist in self._body_artists:
             artist.remove()
         self._body_artists = []
@@ -537,6 +574,103 @@ class SheetView:
         arrow = NOSE_ARROW * (rot @ self.nose)
         self._body_artists.append(self.ax.quiver(
             *centre, *arrow, color="k", linewidth=1.8, arrow_length_ratio=0.25))
+
+
+def ply_colour(ply: int) -> str:
+    """The colour of ply `ply` (0-based) in the sections."""
+    return f"C{ply % 10}"
+
+
+def section_y(snapshots: xr.Dataset) -> float:
+    """y [m] of the section: the projectile's at the first snapshot (0 without one), within the
+    sheet."""
+    ref = snapshots["reference_position"].values[shown_nodes(snapshots)]
+    y = 0.0
+    if int(snapshots.attrs.get("has_projectile", 1)) and snapshots.sizes["snapshot"]:
+        y = float(snapshots["projectile_position"][0, 1])
+    return float(np.clip(y, ref[:, 1].min(), ref[:, 1].max()))
+
+
+def section_nodes(snapshots: xr.Dataset) -> list[np.ndarray]:
+    """For each ply, the indices of its nodes on the grid line nearest the section y (those
+    within half a yarn spacing of the node nearest it), ordered by their reference x."""
+    ref = snapshots["reference_position"].values
+    plies = ply_count(snapshots)
+    n = ref.shape[0]
+    node_ply = (snapshots["node_ply"].values if "node_ply" in snapshots
+                else np.zeros(n, dtype=np.int64))
+    live = np.zeros(n, dtype=bool)
+    live[shown_nodes(snapshots)] = True
+    seg = snapshots["segment_nodes"].values.astype(np.int64)[shown_segments(snapshots)]
+    length = np.linalg.norm(ref[seg[:, 0]] - ref[seg[:, 1]], axis=1)
+    y0 = section_y(snapshots)
+    out = []
+    for p in range(plies):
+        idx = np.flatnonzero(live & (node_ply == p))
+        if idx.size == 0:
+            out.append(idx)
+            continue
+        own = length[node_ply[seg[:, 0]] == p]
+        tol = 0.49 * float(own[own > 0].min()) if np.any(own > 0) else 0.0
+        near = ref[idx[np.argmin(np.abs(ref[idx, 1] - y0))], 1]
+        line = idx[np.abs(ref[idx, 1] - near) <= tol]
+        out.append(line[np.argsort(ref[line, 0], kind="stable")])
+    return out
+
+
+def section_limits(snapshots: xr.Dataset, indices: Sequence[int],
+                   nodes: Sequence[np.ndarray]) -> np.ndarray:
+    """Axis limits [m], shape (2, 2), of the sections (x, z) over the snapshots ``indices``."""
+    every = np.concatenate([np.asarray(i, dtype=np.int64) for i in nodes])
+    ref = snapshots["reference_position"].values[every]
+    lo = np.array([ref[:, 0].min(), ref[:, 2].min()])
+    hi = np.array([ref[:, 0].max(), ref[:, 2].max()])
+    for k in indices:
+        x = snapshots["node_position"][int(k)].values[every]
+        lo = np.minimum(lo, [x[:, 0].min(), x[:, 2].min()])
+        hi = np.maximum(hi, [x[:, 0].max(), x[:, 2].max()])
+    span = hi - lo
+    # never an empty range; a little margin all round (more in z, for the legend)
+    grow = np.maximum(span, 1e-9) - span
+    lo, hi = lo - grow / 2, hi + grow / 2
+    pad = np.array([0.02, 0.12]) * (hi - lo)
+    return np.stack([lo - pad, hi + pad], axis=1)
+
+
+class SectionView:
+    """A pack's section along x through the impact point: z of each ply's nodes on the grid
+    line nearest it (``section_nodes``), a line per ply (``ply_colour``), so the plies are seen
+    one under the other as they deflect."""
+
+    def __init__(self, ax, snapshots: xr.Dataset, limits: np.ndarray | None = None,
+                 indices: Sequence[int] | None = None, *, legend: bool = True,
+                 nodes: list[np.ndarray] | None = None):
+        """limits: ``section_limits`` (default: over ``indices``, or every snapshot); nodes:
+        ``section_nodes`` when already known."""
+        self.ax = ax
+        self.nodes = section_nodes(snapshots) if nodes is None else nodes
+        if limits is None:
+            if indices is None:
+                indices = range(snapshots.sizes["snapshot"])
+            limits = section_limits(snapshots, indices, self.nodes)
+        self.lines = [ax.plot([], [], color=ply_colour(p), lw=1.2, marker=".", ms=2.5,
+                              label=f"ply {p + 1}")[0] for p in range(len(self.nodes))]
+        ax.set_xlim(*limits[0])
+        ax.set_ylim(*limits[1])
+        ax.ticklabel_format(axis="both", style="sci", scilimits=(-2, 3))
+        ax.tick_params(labelsize=7)
+        ax.set_xlabel(f"x [m]   (section at y = {section_y(snapshots) * 1e3:.3g} mm)",
+                      fontsize=8)
+        ax.set_ylabel("z [m]", fontsize=8)
+        if legend:
+            ax.legend(loc="best", fontsize=7, ncols=min(len(self.lines), 4),
+                      framealpha=0.6)
+
+    def update(self, snapshots: xr.Dataset, k: int) -> None:
+        """Show snapshot ``k`` (reads only that snapshot)."""
+        x = snapshots["node_position"][k].values
+        for line, idx in zip(self.lines, self.nodes, strict=True):
+            line.set_data(x[idx, 0], x[idx, 2])
 
 
 def snapshot_tilt_deg(snapshots: xr.Dataset, k: int, history: xr.Dataset | None = None) -> float:
@@ -564,24 +698,44 @@ def sequence_figure(snapshots: xr.Dataset, count: int = 6, history: xr.Dataset |
     """The impact as a grid of 3-D views at ``count`` evenly spaced snapshots (paper Figs. 6, 8).
 
     Yarns are coloured by damage α with one colour bar over the range of α in the shown
-    snapshots (see ``damage_range``); the sphere carries an arrow along its nose marker.
+    snapshots (see ``damage_range``); the sphere carries an arrow along its nose marker. A pack
+    of plies: a section of the plies (``SectionView``) under each view.
     """
     idx = pick_snapshots(snapshots["time"].values, count)
-    alpha = snapshots["yarn_damage"].values[idx] if len(idx) else np.ones(1)
+    shown = shown_segments(snapshots)
+    alpha = snapshots["yarn_damage"].values[idx][:, shown] if len(idx) else np.ones(1)
     norm = Normalize(*damage_range(alpha))
     limits = scene_limits(snapshots, idx)
     ncols = min(3, max(len(idx), 1))
     nrows = max(1, math.ceil(len(idx) / ncols))
+    pack = ply_count(snapshots) > 1
     with matplotlib.rc_context(STYLE):
-        fig = new_figure((4.4 * ncols + 1.2, 3.9 * nrows + 0.8), layout=None)
+        if pack:
+            # under each 3-D view, the plies' section at that time
+            fig = new_figure((4.4 * ncols + 1.2, 5.9 * nrows + 0.8), layout=None)
+            grid = GridSpec(2 * nrows, ncols, figure=fig, height_ratios=[3.9, 1.6] * nrows)
+            nodes = section_nodes(snapshots)
+            cut = section_limits(snapshots, idx, nodes)
+        else:
+            fig = new_figure((4.4 * ncols + 1.2, 3.9 * nrows + 0.8), layout=None)
         for p, k in enumerate(idx):
-            ax = fig.add_subplot(nrows, ncols, p + 1, projection="3d")
+            if pack:
+                r, c = divmod(p, ncols)
+                ax = fig.add_subplot(grid[2 * r, c], projection="3d")
+                SectionView(fig.add_subplot(grid[2 * r + 1, c]), snapshots, cut,
+                            legend=p == 0, nodes=nodes).update(snapshots, int(k))
+            else:
+                ax = fig.add_subplot(nrows, ncols, p + 1, projection="3d")
             SheetView(ax, snapshots, norm, limits).update(snapshots, int(k))
             t = float(snapshots["time"][k]) * _US
             ax.set_title(f"t = {t:.1f} µs,  Θ = {snapshot_tilt_deg(snapshots, k, history):.2f}°",
                          fontsize=10)
-        fig.subplots_adjust(left=0.0, right=0.86, bottom=0.02, top=0.88, wspace=0.02,
-                            hspace=0.08)
+        if pack:
+            fig.subplots_adjust(left=0.06, right=0.86, bottom=0.1 / nrows, top=0.9,
+                                wspace=0.25, hspace=0.3)
+        else:
+            fig.subplots_adjust(left=0.0, right=0.86, bottom=0.02, top=0.88, wspace=0.02,
+                                hspace=0.08)
         damage_colourbar(fig, norm, fig.add_axes((0.895, 0.2, 0.015, 0.6)))
         meta = history if history is not None else snapshots
         note = status_note(meta)
