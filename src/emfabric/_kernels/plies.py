@@ -30,10 +30,13 @@ from emfabric._kernels.records import ROW_COUNT
 
 
 @njit(cache=True)
-def _normals(nodes, ply, x, out):
-    """The unit normal t_i × t_j of ply `ply`'s grid at each of its nodes into out[:, local]
+def _normals(nodes, ply, x, out, level):
+    """The unit normal t_i × t_j of ply `ply`'s grid at each of its nodes n into out[:, n]
     (central differences along the grid's rows and columns, one-sided at its edges: the same
-    numbers for mirror-image nodes of a mirror-symmetric state)."""
+    numbers for mirror-image nodes of a mirror-symmetric state), and level[n] = 1 where the
+    node and the four it takes its normal from are at their reference height (then the normal
+    is exactly ±e_z), else 0."""
+    z0 = nodes.x0[2]
     n0 = nodes.ply_nodes[ply]
     j0 = nodes.ply_rows[ply]
     nx = nodes.rows[j0, ROW_COUNT]
@@ -54,7 +57,9 @@ def _normals(nodes, ply, x, out):
             ny_ = uz * wx - ux * wz
             nz_ = ux * wy - uy * wx
             size = math.sqrt(nx_ * nx_ + ny_ * ny_ + nz_ * nz_)
-            k = j * nx + i
+            k = n0 + j * nx + i
+            level[k] = (x[2, k] == z0[k] and x[2, a] == z0[a] and x[2, b] == z0[b]
+                        and x[2, c] == z0[c] and x[2, d] == z0[d])
             if size > 0.0:
                 out[0, k] = nx_ / size
                 out[1, k] = ny_ / size
@@ -65,10 +70,17 @@ def _normals(nodes, ply, x, out):
                 out[2, k] = 1.0
 
 
+LEVEL_BOX = 3
+"""Half-width (in master grid nodes) of the level neighbourhood that lets _pass skip a node:
+more than the 3 × 3 box around the nearest node plus the in-plane drift between plies that a
+longitudinal wave alone makes."""
+
+
 @njit(cache=True, inline="always")
-def _units(value, quantum):
-    """value/quantum rounded to the nearest integer, halves away from zero (odd: −x gives −n)."""
-    r = math.floor(abs(value) / quantum + 0.5)
+def _units(value, per_unit):
+    """value·per_unit (1/the unit, a power of two: exact) rounded to the nearest integer, halves
+    away from zero (odd: −x gives −n)."""
+    r = math.floor(abs(value) * per_unit + 0.5)
     return np.int64(-r if value < 0.0 else r)
 
 
@@ -81,10 +93,16 @@ def _dist2(x, a, b):
 
 
 @njit(cache=True)
-def _pass(phys, master, slave, sign, gap, x, v, nrm, acc, guess, shares):
+def _pass(phys, master, slave, sign, gap, x, v, nrm, acc, guess, shares, level):
     """The nodes of ply `slave` against the surface of ply `master` (normals nrm of master's
     nodes, times sign to point towards slave): impulses and placements into acc (integers).
-    guess: the reference-nearest master node of each node; shares: scratch, (box count,)."""
+    guess: the reference-nearest master node of each node; shares: scratch, (2, box count):
+    each box node's w and gap; level: _normals' flags.
+
+    A node at its reference height whose neighbourhood of the master ply (LEVEL_BOX around
+    its reference-nearest node) is level everywhere is skipped: every gap there is the plies'
+    reference distance, at least the contact distance (the transverse wave has not come).
+    Only then does ply contact cost less than its full pass."""
     nodes, law = phys.nodes, phys.contact
     inv_mass, mass = nodes.inv_mass, nodes.mass
     m0 = nodes.ply_nodes[master]
@@ -96,22 +114,26 @@ def _pass(phys, master, slave, sign, gap, x, v, nrm, acc, guess, shares):
     bi = law.ply_box[master, 0]
     bj = law.ply_box[master, 1]
     wide = 2 * bi + 1
-    qi, qx = law.ply_quantum[0], law.ply_quantum[1]
+    qi, qx = 1.0 / law.ply_quantum[0], 1.0 / law.ply_quantum[1]
     for n in range(nodes.ply_nodes[slave], nodes.ply_nodes[slave + 1]):
         k = guess[n]
         if k < 0 or mass[n] == 0.0:
             continue
-        # at rest where it started, and so is its reference neighbour: no contact (the plies
-        # start at least ply_gap apart)
-        if (v[0, n] == 0.0 and v[1, n] == 0.0 and v[2, n] == 0.0 and v[0, k] == 0.0
-                and v[1, k] == 0.0 and v[2, k] == 0.0 and x[0, n] == nodes.x0[0, n]
-                and x[1, n] == nodes.x0[1, n] and x[2, n] == nodes.x0[2, n]
-                and x[0, k] == nodes.x0[0, k] and x[1, k] == nodes.x0[1, k]
-                and x[2, k] == nodes.x0[2, k]):
-            continue
-        # walk over master's grid to its node nearest to n
         ci = (k - m0) % mnx
         cj = (k - m0) // mnx
+        # at its reference height over a level neighbourhood: no contact
+        if x[2, n] == nodes.x0[2, n]:
+            flat = True
+            for jj in range(max(cj - LEVEL_BOX, 0), min(cj + LEVEL_BOX + 1, mny)):
+                row = m0 + jj * mnx
+                for ii in range(max(ci - LEVEL_BOX, 0), min(ci + LEVEL_BOX + 1, mnx)):
+                    if level[row + ii] == 0:
+                        flat = False
+                if not flat:
+                    break
+            if flat:
+                continue
+        # walk over master's grid to its node nearest to n
         best = _dist2(x, n, k)
         for _step in range(mnx + mny):
             ni, nj = ci, cj
@@ -130,52 +152,50 @@ def _pass(phys, master, slave, sign, gap, x, v, nrm, acc, guess, shares):
             ci, cj = ni, nj
         # the shares w of the master nodes around it, and their sum in mirror-paired order
         total = 0.0
+        acting = False
         for dj in range(-bj, bj + 1):
             for di in range(-bi, bi + 1):
                 ii = ci + di
                 jj = cj + dj
                 w = 0.0
+                g = 0.0
                 if 0 <= ii < mnx and 0 <= jj < mny:
                     km = m0 + jj * mnx + ii
                     if mass[km] > 0.0:
-                        loc = km - m0
                         dx = x[0, n] - x[0, km]
                         dy = x[1, n] - x[1, km]
                         dz = x[2, n] - x[2, km]
-                        g = sign * ((nrm[0, loc] * dx + nrm[1, loc] * dy) + nrm[2, loc] * dz)
+                        g = sign * ((nrm[0, km] * dx + nrm[1, km] * dy) + nrm[2, km] * dz)
                         r2 = ((dx * dx + dy * dy) + dz * dz) - g * g
                         if r2 < rho2 and abs(g) < rho:
                             q = 1.0 - r2 / rho2
                             w = q * q
-                shares[(dj + bj) * wide + di + bi] = w
+                            if g < gap and g > -gap:
+                                acting = True
+                shares[0, (dj + bj) * wide + di + bi] = w
+                shares[1, (dj + bj) * wide + di + bi] = g
+        if not acting:
+            continue
         for b in range(bj + 1):
             row = 0.0
             for jsign in range(2 if b > 0 else 1):
                 jrow = (bj + b if jsign == 0 else bj - b) * wide
-                part = shares[jrow + bi]
+                part = shares[0, jrow + bi]
                 for a in range(1, bi + 1):
-                    part += shares[jrow + bi - a] + shares[jrow + bi + a]
+                    part += shares[0, jrow + bi - a] + shares[0, jrow + bi + a]
                 row = part if jsign == 0 else row + part
             total += row
-        if total == 0.0:
-            continue
         for dj in range(-bj, bj + 1):
             for di in range(-bi, bi + 1):
-                w = shares[(dj + bj) * wide + di + bi]
-                if w == 0.0:
+                w = shares[0, (dj + bj) * wide + di + bi]
+                g = shares[1, (dj + bj) * wide + di + bi]
+                if w == 0.0 or not (g < gap and g > -gap):
                     continue
                 km = m0 + (cj + dj) * mnx + ci + di
                 inv_sum = inv_mass[n] + inv_mass[km]
                 if inv_sum == 0.0:
                     continue
-                loc = km - m0
-                nh = (sign * nrm[0, loc], sign * nrm[1, loc], sign * nrm[2, loc])
-                dx = x[0, n] - x[0, km]
-                dy = x[1, n] - x[1, km]
-                dz = x[2, n] - x[2, km]
-                g = (nh[0] * dx + nh[1] * dy) + nh[2] * dz
-                if not (g < gap and g > -gap):
-                    continue
+                nh = (sign * nrm[0, km], sign * nrm[1, km], sign * nrm[2, km])
                 share = 0.5 * w / total
                 m_nk = 1.0 / inv_sum
                 j, _slid = contact_impulse(m_nk, (v[0, n], v[1, n], v[2, n]),
@@ -220,7 +240,8 @@ def _apply(nodes, law, x, v, f, acc, lag):
 @njit(cache=True)
 def ply_contact(phys, x, v, f, work, lag):
     """Ply-to-ply contact of every pair of neighbouring plies at positions x and velocities v
-    (changed in place); f: the node forces whose work the placement does, lag: the time over
+    (changed in place); work.xbuf holds the plies' normals afterwards; f: the node forces whose
+    work the placement does, lag: the time over
     which the scheme's position update sees a velocity change (energy bookkeeping: Δt/2 for
     central differences). Returns (dissipation [J], placement work [J]),
     also kept in work.ply_sums; (0, 0) for one ply."""
@@ -230,21 +251,21 @@ def ply_contact(phys, x, v, f, work, lag):
         work.ply_sums[0] = 0.0
         work.ply_sums[1] = 0.0
         return 0.0, 0.0
-    widest = 0
     box = 1
     for p in range(plies):
-        widest = max(widest, nodes.ply_nodes[p + 1] - nodes.ply_nodes[p])
         box = max(box, (2 * law.ply_box[p, 0] + 1) * (2 * law.ply_box[p, 1] + 1))
-    nrm = np.empty((3, widest))
-    shares = np.empty(box)
+    shares = np.empty((2, box))
     acc = work.ply_acc
+    # every ply's normals, once (into work.xbuf: free until the projectile's contact)
+    nrm = work.xbuf
+    level = np.empty(x.shape[1], dtype=np.bool_)
+    for p in range(plies):
+        _normals(nodes, p, x, nrm, level)
     for p in range(plies - 1):
         gap = law.ply_gap[p]
         # ply p + 1's nodes against ply p's underside, then ply p's nodes against ply p + 1
-        _normals(nodes, p, x, nrm)
-        _pass(phys, p, p + 1, -1.0, gap, x, v, nrm, acc, law.ply_guess[0], shares)
-        _normals(nodes, p + 1, x, nrm)
-        _pass(phys, p + 1, p, 1.0, gap, x, v, nrm, acc, law.ply_guess[1], shares)
+        _pass(phys, p, p + 1, -1.0, gap, x, v, nrm, acc, law.ply_guess[0], shares, level)
+        _pass(phys, p + 1, p, 1.0, gap, x, v, nrm, acc, law.ply_guess[1], shares, level)
     lost, placed = _apply(nodes, law, x, v, f, acc, lag)
     work.ply_sums[0] = lost
     work.ply_sums[1] = placed
