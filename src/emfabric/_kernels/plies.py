@@ -30,21 +30,45 @@ from emfabric._kernels.records import ROW_COUNT
 
 
 @njit(cache=True)
-def _normals(nodes, ply, x, out, level):
-    """The unit normal t_i × t_j of ply `ply`'s grid at each of its nodes n into out[:, n]
-    (central differences along the grid's rows and columns, one-sided at its edges: the same
-    numbers for mirror-image nodes of a mirror-symmetric state), and level[n] = 1 where the
-    node and the four it takes its normal from are at their reference height (then the normal
-    is exactly ±e_z), else 0."""
-    z0 = nodes.x0[2]
+def _region(nodes, ply, x, out):
+    """out[:] = (i_lo, i_hi, j_lo, j_hi): the grid box of ply `ply` outside which every node
+    and its four grid neighbours are at their reference height (so its normal is exactly e_z):
+    the box of the nodes that moved off it, widened by one and clipped; i_lo > i_hi if none."""
     n0 = nodes.ply_nodes[ply]
     j0 = nodes.ply_rows[ply]
     nx = nodes.rows[j0, ROW_COUNT]
     ny = nodes.ply_rows[ply + 1] - j0
+    z0 = nodes.x0[2]
+    ilo, ihi, jlo, jhi = nx, -1, ny, -1
     for j in range(ny):
+        row = n0 + j * nx
+        for i in range(nx):
+            if x[2, row + i] != z0[row + i]:
+                ilo = min(ilo, i)
+                ihi = max(ihi, i)
+                jlo = min(jlo, j)
+                jhi = max(jhi, j)
+    if ihi < 0:
+        out[0], out[1], out[2], out[3] = 1, 0, 1, 0
+    else:
+        out[0], out[1] = max(ilo - 1, 0), min(ihi + 1, nx - 1)
+        out[2], out[3] = max(jlo - 1, 0), min(jhi + 1, ny - 1)
+
+
+@njit(cache=True)
+def _normals(nodes, ply, x, out, box):
+    """The unit normal t_i × t_j of ply `ply`'s grid at each of its nodes n in the grid box
+    `box` (_region) into out[:, n] (central differences along the grid's rows and columns,
+    one-sided at its edges: the same numbers for mirror-image nodes of a mirror-symmetric
+    state). Outside the box it is e_z exactly (_normal)."""
+    n0 = nodes.ply_nodes[ply]
+    j0 = nodes.ply_rows[ply]
+    nx = nodes.rows[j0, ROW_COUNT]
+    ny = nodes.ply_rows[ply + 1] - j0
+    for j in range(box[2], box[3] + 1):
         jm = j - 1 if j > 0 else j
         jp = j + 1 if j < ny - 1 else j
-        for i in range(nx):
+        for i in range(box[0], box[1] + 1):
             im = i - 1 if i > 0 else i
             ip = i + 1 if i < nx - 1 else i
             a = n0 + j * nx + ip
@@ -58,8 +82,6 @@ def _normals(nodes, ply, x, out, level):
             nz_ = ux * wy - uy * wx
             size = math.sqrt(nx_ * nx_ + ny_ * ny_ + nz_ * nz_)
             k = n0 + j * nx + i
-            level[k] = (x[2, k] == z0[k] and x[2, a] == z0[a] and x[2, b] == z0[b]
-                        and x[2, c] == z0[c] and x[2, d] == z0[d])
             if size > 0.0:
                 out[0, k] = nx_ / size
                 out[1, k] = ny_ / size
@@ -68,6 +90,15 @@ def _normals(nodes, ply, x, out, level):
                 out[0, k] = 0.0
                 out[1, k] = 0.0
                 out[2, k] = 1.0
+
+
+@njit(cache=True, inline="always")
+def _normal(nrm, k, i, j, box, sign):
+    """sign × the normal of the master node k at grid (i, j) (_normals inside box, e_z
+    outside)."""
+    if box[0] <= i <= box[1] and box[2] <= j <= box[3]:
+        return sign * nrm[0, k], sign * nrm[1, k], sign * nrm[2, k]
+    return 0.0, 0.0, sign
 
 
 LEVEL_BOX = 3
@@ -93,16 +124,16 @@ def _dist2(x, a, b):
 
 
 @njit(cache=True)
-def _pass(phys, master, slave, sign, gap, x, v, nrm, acc, guess, shares, level):
+def _pass(phys, master, slave, sign, gap, x, v, nrm, acc, guess, shares, box):
     """The nodes of ply `slave` against the surface of ply `master` (normals nrm of master's
     nodes, times sign to point towards slave): impulses and placements into acc (integers).
     guess: the reference-nearest master node of each node; shares: scratch, (2, box count):
-    each box node's w and gap; level: _normals' flags.
+    each box node's w and gap; box: master's _region.
 
-    A node at its reference height whose neighbourhood of the master ply (LEVEL_BOX around
-    its reference-nearest node) is level everywhere is skipped: every gap there is the plies'
-    reference distance, at least the contact distance (the transverse wave has not come).
-    Only then does ply contact cost less than its full pass."""
+    A node at its reference height whose reference-nearest master node lies more than
+    LEVEL_BOX outside master's region is skipped: every gap there is the plies' reference
+    distance, at least the contact distance (the transverse wave has not come). Only there
+    does ply contact cost less than its full pass."""
     nodes, law = phys.nodes, phys.contact
     inv_mass, mass = nodes.inv_mass, nodes.mass
     m0 = nodes.ply_nodes[master]
@@ -122,17 +153,10 @@ def _pass(phys, master, slave, sign, gap, x, v, nrm, acc, guess, shares, level):
         ci = (k - m0) % mnx
         cj = (k - m0) // mnx
         # at its reference height over a level neighbourhood: no contact
-        if x[2, n] == nodes.x0[2, n]:
-            flat = True
-            for jj in range(max(cj - LEVEL_BOX, 0), min(cj + LEVEL_BOX + 1, mny)):
-                row = m0 + jj * mnx
-                for ii in range(max(ci - LEVEL_BOX, 0), min(ci + LEVEL_BOX + 1, mnx)):
-                    if level[row + ii] == 0:
-                        flat = False
-                if not flat:
-                    break
-            if flat:
-                continue
+        if x[2, n] == nodes.x0[2, n] and (
+                box[0] > box[1] or ci < box[0] - LEVEL_BOX or ci > box[1] + LEVEL_BOX
+                or cj < box[2] - LEVEL_BOX or cj > box[3] + LEVEL_BOX):
+            continue
         # walk over master's grid to its node nearest to n
         best = _dist2(x, n, k)
         for _step in range(mnx + mny):
@@ -165,7 +189,8 @@ def _pass(phys, master, slave, sign, gap, x, v, nrm, acc, guess, shares, level):
                         dx = x[0, n] - x[0, km]
                         dy = x[1, n] - x[1, km]
                         dz = x[2, n] - x[2, km]
-                        g = sign * ((nrm[0, km] * dx + nrm[1, km] * dy) + nrm[2, km] * dz)
+                        nh = _normal(nrm, km, ii, jj, box, sign)
+                        g = (nh[0] * dx + nh[1] * dy) + nh[2] * dz
                         r2 = ((dx * dx + dy * dy) + dz * dz) - g * g
                         if r2 < rho2 and abs(g) < rho:
                             q = 1.0 - r2 / rho2
@@ -195,7 +220,7 @@ def _pass(phys, master, slave, sign, gap, x, v, nrm, acc, guess, shares, level):
                 inv_sum = inv_mass[n] + inv_mass[km]
                 if inv_sum == 0.0:
                     continue
-                nh = (sign * nrm[0, km], sign * nrm[1, km], sign * nrm[2, km])
+                nh = _normal(nrm, km, ci + di, cj + dj, box, sign)
                 share = 0.5 * w / total
                 m_nk = 1.0 / inv_sum
                 j, _slid = contact_impulse(m_nk, (v[0, n], v[1, n], v[2, n]),
@@ -258,14 +283,17 @@ def ply_contact(phys, x, v, f, work, lag):
     acc = work.ply_acc
     # every ply's normals, once (into work.xbuf: free until the projectile's contact)
     nrm = work.xbuf
-    level = np.empty(x.shape[1], dtype=np.bool_)
+    region = np.empty((plies, 4), dtype=np.int64)
     for p in range(plies):
-        _normals(nodes, p, x, nrm, level)
+        _region(nodes, p, x, region[p])
+        _normals(nodes, p, x, nrm, region[p])
     for p in range(plies - 1):
         gap = law.ply_gap[p]
         # ply p + 1's nodes against ply p's underside, then ply p's nodes against ply p + 1
-        _pass(phys, p, p + 1, -1.0, gap, x, v, nrm, acc, law.ply_guess[0], shares, level)
-        _pass(phys, p + 1, p, 1.0, gap, x, v, nrm, acc, law.ply_guess[1], shares, level)
+        _pass(phys, p, p + 1, -1.0, gap, x, v, nrm, acc, law.ply_guess[0], shares,
+              region[p])
+        _pass(phys, p + 1, p, 1.0, gap, x, v, nrm, acc, law.ply_guess[1], shares,
+              region[p + 1])
     lost, placed = _apply(nodes, law, x, v, f, acc, lag)
     work.ply_sums[0] = lost
     work.ply_sums[1] = placed
