@@ -36,7 +36,20 @@ then, with emfabric's environment active::
 
 Options: ``--after-contact`` (simulated time after the first contact, default 50e-6 s),
 ``--schemes`` (emfabric's integrators), ``--repeat`` (timed runs, best reported), ``--json FILE``
-(all figures), ``--no-peer`` / ``--no-emfabric``. benchmarks/PEER.md has the measured figures.
+(all figures), ``--no-peer`` / ``--no-emfabric``, ``--plies K`` (below). benchmarks/PEER.md has
+the measured figures.
+
+``--plies K`` (default 1: the single sheet above) runs a pack of K identical touching plies in
+both codes: emfabric with ``fabric.plies = K`` (default spacing: touching, the sum of the yarn
+radii, 2 × 0.185 mm; ply 1 at z = 0, the others below; its ply-to-ply contact) and central
+differences only (its φ-scheme refuses packs: ``--schemes phi`` is refused with K > 1); the peer
+in its stacked mode (``generate_rectangular_grid(n_plies=K, t_ply=...)``: K full sheets t_ply
+apart along +z, the sphere the same gap above the top one, every layer clamped). The peer's
+t_ply is the layers' mid-plane spacing and at the same time the distance below which its
+inter-ply penalty pushes a node and the node of the same index in the next layer apart (the
+same k_pen as the body's): the touching spacing, the same as emfabric's. E.g.::
+
+    python benchmarks/peer.py --plies 4 --repeat 3
 """
 
 from __future__ import annotations
@@ -71,8 +84,11 @@ def parse_args(argv=None) -> argparse.Namespace:
                     help="Numba threads for both codes (NUMBA_NUM_THREADS; default 1)")
     ap.add_argument("--after-contact", type=float, default=50e-6,
                     help="simulated time after the first contact [s] (default 50e-6)")
-    ap.add_argument("--schemes", nargs="+", default=["central-difference", "phi"],
-                    choices=["central-difference", "phi"])
+    ap.add_argument("--schemes", nargs="+", default=None, choices=["central-difference", "phi"],
+                    help="emfabric's integrators (default: both; central-difference only with "
+                         "--plies > 1)")
+    ap.add_argument("--plies", type=int, default=1,
+                    help="plies in the pack, touching, in both codes (default 1: one sheet)")
     ap.add_argument("--repeat", type=int, default=1, help="timed runs after the warm-up (best)")
     ap.add_argument("--peer-cfl", type=float, default=PEER_CFL,
                     help="the peer's CFL factor (default 0.5·√2, emfabric's rule; its GUI: 0.8)")
@@ -87,6 +103,14 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument("--no-emfabric", action="store_true")
     ap.add_argument("--json", type=Path, default=None, help="write every figure here")
     args = ap.parse_args(argv)
+    if not 1 <= args.plies <= 64:
+        ap.error(f"--plies {args.plies}: allowed 1 … 64 (emfabric's fabric.plies range)")
+    if args.schemes is None:
+        args.schemes = ["central-difference", "phi"] if args.plies == 1 else ["central-difference"]
+    elif args.plies > 1 and "phi" in args.schemes:
+        ap.error(f"--schemes phi with --plies {args.plies}: emfabric runs packs of plies with "
+                 "central differences only (its φ-scheme refuses fabric.plies > 1); allowed: "
+                 "--schemes central-difference, or --plies 1")
     if args.peer_chunk % args.peer_save_interval:
         ap.error("--peer-chunk must be a multiple of --peer-save-interval (the peer writes its "
                  "history past the end of its arrays otherwise)")
@@ -107,6 +131,15 @@ def problem(sc, args) -> dict:
     k_yarn = f.material.youngs_modulus * area / h  # small-strain stiffness of a segment [N/m]
     areal = node_mass / h ** 2  # the peer lumps ρ_A·h² on an interior node: the same mass
     thickness = k_yarn / f.material.youngs_modulus  # the peer's k = E·t, t = ρ_A/ρ_fibre
+    plies = args.plies
+    # emfabric's default ply spacing: touching, r + r for identical plies (sim/builder.ply_z);
+    # the peer gets it with its mantissa cut to 40 bits (a relative change below 1e-12) so that
+    # its ply·t_ply heights and their differences are exact: with t_ply = 0.37 mm as it is,
+    # plies 3 and 4 start 1e-19 m "inside" each other by rounding, and its step rule adds
+    # k_pen to every node of both (clamped corners too) from the start
+    spacing = f.ply_spacing if f.ply_spacing is not None else 2.0 * f.yarn_radius
+    mant, expo = math.frexp(spacing)
+    t_ply = math.ldexp(round(mant * 2.0 ** 40) / 2.0 ** 40, expo)
     speed = -p.velocity[2]
     if p.shape != "sphere" or p.velocity[0] or p.velocity[1] or speed <= 0 or p.position:
         raise SystemExit("the peer set-up is written for a sphere falling along −z")
@@ -129,7 +162,9 @@ def problem(sc, args) -> dict:
         "end_time": t_contact + args.after_contact, "t_contact_nominal": t_contact,
         "chunk": args.peer_chunk, "save_interval": args.peer_save_interval,
         "threads": args.threads, "repeat": args.repeat,
+        "plies": plies, "t_ply": t_ply if plies > 1 else None,
         # for the report only
+        "ply_spacing_emfabric": spacing if plies > 1 else None,
         "h": h, "node_mass": node_mass, "k_yarn": k_yarn,
     }
 
@@ -172,8 +207,10 @@ def run_emfabric(scheme: str, end_time: float, args) -> dict:
 
     import emfabric
 
-    sc = emfabric.load_scenario(SCENARIO, {"solver.end_time": end_time,
-                                           "solver.integrator": scheme})
+    over = {"solver.end_time": end_time, "solver.integrator": scheme}
+    if args.plies > 1:
+        over["fabric.plies"] = args.plies  # default spacing: touching
+    sc = emfabric.load_scenario(SCENARIO, over)
     t0 = time.perf_counter()
     first = emfabric.run(sc, threads=args.threads)
     first_wall = time.perf_counter() - t0
@@ -207,11 +244,15 @@ def run_emfabric(scheme: str, end_time: float, args) -> dict:
                                   if len(hit) else None),
         "projectile_vz": float(s["final_velocity_m_s"][2]),
         "max_deflection": float(s["max_deflection_m"]),
+        "max_deflection_per_ply": ([float(x) for x in h["max_deflection_per_ply"].values[-1]]
+                                   if "max_deflection_per_ply" in h else None),
         "max_strain_yarn": float(s["max_stretch"]) - 1.0,
         "broken_yarns": int(s["broken_yarns"]),
         "numba_num_threads": numba.config.NUMBA_NUM_THREADS,
         "numba_threads_used": numba.get_num_threads(), "threading_layer": layer,
         "numba_version": numba.__version__, "emfabric_version": emfabric.__version__,
+        "plies": int(s.get("plies", sc.fabric.plies)),
+        "plies_perforated": int(s.get("plies_perforated", 0)),
         "first_status": first.status, "emfabric_source": source_of(emfabric),
     }
 
@@ -225,6 +266,7 @@ def mismatches(cfg: dict, peer: dict | None, emf: dict, threads: int) -> list[tu
     m = cfg["node_mass"]
     gersh = math.sqrt(m / (4 * k))  # sqrt(m/Σk) of a free node at rest, Σk = 4 yarns
     cd = emf.get("central-difference")
+    plies = cfg.get("plies", 1)
     rows = [
         ("time integration",
          "central differences (one force evaluation a step) or the implicit φ-scheme "
@@ -236,7 +278,11 @@ def mismatches(cfg: dict, peer: dict | None, emf: dict, threads: int) -> list[tu
          f"{COURANT * math.sqrt(2) * gersh * 1e9:.0f} ns. φ: eq. 3.9 controller (6 iterations)",
          f"cfl {cfg['cfl_factor']:.4f} × min over ALL nodes (clamped ones too) of sqrt(m/Σk), "
          f"Σk = linear spring k + the penalty k of nodes within 2h of the body "
-         f"(before contact too): {(peer['dt_mean'] if peer else cfl_dt(cfg, kp)) * 1e9:.0f} ns"),
+         f"(before contact too)"
+         + (" + k_pen for each neighbouring layer closer than t_ply (2 k_pen between two "
+            "compressed layers)" if plies > 1 else "")
+         + f": {(peer['dt_mean'] if peer else cfl_dt(cfg, kp)) * 1e9:.0f} ns"
+         + (" mean" if plies > 1 else "")),
         ("contact law",
          "kinematic: a node inside the sphere is put on its surface and takes the surface "
          "velocity (impulse), no penetration; nodes only (segments off for the sphere)",
@@ -252,21 +298,26 @@ def mismatches(cfg: dict, peer: dict | None, emf: dict, threads: int) -> list[tu
          f"{k:.4g} N/m (stiffens ≈ 1.5ε relative)",
          f"linear spring F = k(L − L0), tension only, k = E·ρ_A/ρ_f = {k:.4g} N/m "
          f"(ρ_f = {cfg['fiber_density_gcc']:.3f} g/cm³ chosen for it)"),
-        ("modulus scatter", "per-yarn 𝔼 with cv 0.10 (seed 0)", "uniform"),
+        ("modulus scatter",
+         "per-yarn 𝔼 with cv 0.10 (seed 0" + ("; ply p from the sequence (seed, p): no two "
+                                               "plies alike" if plies > 1 else "") + ")",
+         "uniform"),
         ("damage",
          "Zohdi eq. 2.6: α = min(α_prev, exp(−λ(U−U_c)/U_c)), λ = 0.1, U_c = 1.03; never "
          "fully broken",
          f"linear softening from ε = {cfg['damage_onset_strain']:.3f} to failure at "
          f"{cfg['failure_strain']:.2f} (Zohdi's slope at the onset); failure-strain size "
          "regularisation inactive (h > 1 mm)"),
-        ("network", "19 800 yarn segments",
-         f"{peer['springs'] if peer else 39402} springs: + 2 diagonal shear springs a cell, "
-         "inert at shear_ratio 0 but looped over every step"),
+        ("network", f"{plies * 19800:,} yarn segments".replace(",", " ")
+         + (f" ({plies} plies × 19 800)" if plies > 1 else ""),
+         f"{peer['springs'] if peer else plies * 39402} springs: + 2 diagonal shear springs a "
+         "cell, inert at shear_ratio 0 but looped over every step"),
         ("mass lumping",
          f"every node ρ_A·L²/(nx·ny) = {m:.4g} kg",
          f"tributary ρ_A'·h² with ρ_A' = {cfg['areal_density_kgm2']:.5f} kg/m² (so the free "
          "nodes match); edge ½, corner ¼ (they are clamped, but enter its CFL minimum)"),
-        ("edges", "four edges clamped (never move)", "four edges clamped (force zeroed)"),
+        ("edges", "four edges clamped (never move)" + (", every ply" if plies > 1 else ""),
+         "four edges clamped (force zeroed)" + (", every layer" if plies > 1 else "")),
         ("damping", "none", "none (its default Rayleigh β = 1e-9 s set to 0); velocity cap "
          "h/Δt, never reached here"),
         ("projectile",
@@ -287,6 +338,33 @@ def mismatches(cfg: dict, peer: dict | None, emf: dict, threads: int) -> list[tu
          f"{cfg['chunk']}-step chunks as its worker (no files, no GUI queue)"),
         ("floating point", "no fastmath", "fastmath=True everywhere"),
     ]
+    if plies > 1:
+        sp, tp = cfg["ply_spacing_emfabric"], cfg["t_ply"]
+        overlaps = peer.get("rest_overlaps", 0) if peer else 0
+        rows += [
+            ("plies, stacking",
+             f"{plies} plies of the sheet, ply 1 at z = 0, the others below, {sp * 1e3:.3f} mm "
+             "apart (default: touching, r + r = the contact distance)",
+             f"{plies} layers of the sheet ('Mode B': n_plies = {plies}, t_ply = {tp * 1e3:.3f} "
+             f"mm, cut to 40 mantissa bits, {abs(tp - sp):.1e} m off), layer 0 at z = 0, the "
+             f"others above, the sphere {cfg['gap'] * 1e3:g} mm above the top one; t_ply is "
+             f"the spacing and the contact distance at once (rest overlaps from rounding: "
+             f"{overlaps})"),
+            ("ply-to-ply contact",
+             "every node against the neighbouring ply's surface (its nearest lattice patch, "
+             "normal from the deformed ply), both ways, with the projectile's stick/slip "
+             "impulse law (μ_s 1.0, μ_d 0.95), inelastic in the normal, the node placed at the "
+             "contact distance; integer-summed (momentum-exact); no stiffness in the step rule",
+             f"penalty with the body's k_pen ({kp:.3g} N/m) between node i of a layer and node "
+             f"i of the next only (same index: no contact with the neighbour's surface between "
+             f"nodes, so a layer sliding sideways loses its partner), along z only: "
+             f"F = k_pen (t_ply − |Δz|) pushing by the sign of Δz, elastic (no damping: "
+             f"layers can rebound apart); regularised Coulomb sliding "
+             f"μ = {cfg['mu_s']} in x, y, no stick state; only where both nodes keep a spring"),
+            ("projectile and plies",
+             "the projectile meets every ply (a broken one lets it through to the next)",
+             "the sphere's penalty acts on any node of any layer inside it"),
+        ]
     return rows
 
 
@@ -295,6 +373,15 @@ def cfl_dt(cfg: dict, k_pen: float) -> float:
     m, k = cfg["node_mass"], cfg["k_yarn"]
     return cfg["cfl_factor"] * min(math.sqrt(m / (4 * k + k_pen)), math.sqrt(m / 4 / (2 * k)),
                                    math.sqrt(m / 2 / (3 * k)))
+
+
+def pack_words(cfg: dict) -> str:
+    """'100 × 100 sheet, 1 ply' or '3 plies of 100 × 100, touching (0.370 mm apart)'."""
+    n = cfg["nodes"]
+    if cfg.get("plies", 1) == 1:
+        return f"{n} × {n} sheet, 1 ply"
+    return (f"{cfg['plies']} plies of {n} × {n}, touching ({cfg['ply_spacing_emfabric'] * 1e3:.3f} "
+            "mm apart)")
 
 
 def load_line() -> str:
@@ -335,7 +422,7 @@ def main(argv=None) -> None:
     sc = emfabric.load_scenario(SCENARIO)
     cfg = problem(sc, args)
     end = cfg["end_time"]
-    print(f"{SCENARIO}: 100 × 100 sheet, end time {end * 1e6:.2f} µs (first contact at "
+    print(f"{SCENARIO}: {pack_words(cfg)}, end time {end * 1e6:.2f} µs (first contact at "
           f"{cfg['t_contact_nominal'] * 1e6:.2f} µs + {args.after_contact * 1e6:g} µs), "
           f"{args.threads} thread(s)", flush=True)
     before_line = load_line()
@@ -358,6 +445,8 @@ def main(argv=None) -> None:
     for scheme, r in emf.items():
         rows.append(dict(r, label=f"emfabric {scheme}", dt_lo=r["dt_min"], dt_hi=r["dt_max"]))
     print()
+    print(f"{SCENARIO}, {pack_words(cfg)}, {args.threads} thread(s), t_end "
+          f"{end * 1e6:.2f} µs:")
     print(table(rows))
     print()
     print("wall s: the stepping loop of the best timed run (emfabric: RunResult.wall_time; the "
@@ -368,13 +457,22 @@ def main(argv=None) -> None:
         print(f"  {r['label']}: first contact {fc_s}; timed walls "
               f"{', '.join(f'{w:.3f}' for w in r['timed_walls_s'])} s; NUMBA_NUM_THREADS "
               f"{r['numba_num_threads']}, threads used {r['numba_threads_used']}, layer "
-              f"{r['threading_layer']}, numba {r['numba_version']}")
+              f"{r['threading_layer']}, numba {r['numba_version']}"
+              + (f"; deflection per ply from the top "
+                 f"{' / '.join(f'{d * 1e3:.2f}' for d in r['max_deflection_per_ply'])} mm"
+                 if args.plies > 1 and r.get("max_deflection_per_ply") else ""))
     if peer:
         print(f"  peer: k_yarn {peer['k_yarn']:.4g} N/m, k_penalty {peer['k_penalty']:.4g} N/m, "
               f"interior node mass {peer['node_mass_interior']:.4g} kg (emfabric "
-              f"{cfg['node_mass']:.4g}), failed springs {peer['failed_springs']}")
+              f"{cfg['node_mass']:.4g}), failed springs {peer['failed_springs']}"
+              + (f"; {peer['plies']} layers, {peer['nodes_total']} nodes, t_ply "
+                 f"{peer['t_ply']:.6g} m, rest overlaps {peer['rest_overlaps']}"
+                 if peer.get("plies", 1) > 1 else ""))
     if emf:
-        print(f"  emfabric from {next(iter(emf.values()))['emfabric_source']}")
+        e0 = next(iter(emf.values()))
+        print(f"  emfabric from {e0['emfabric_source']}"
+              + (f"; {e0['plies']} plies, perforated {e0['plies_perforated']}"
+                 if e0.get("plies", 1) > 1 else ""))
     print(f"after: {after}")
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
           f"Python {platform.python_version()}")

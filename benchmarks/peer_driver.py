@@ -13,6 +13,12 @@ peer's fused_leapfrog_loop chunk by chunk the same way (chunks of `chunk` steps,
 post-processing. The run is done `repeat + 1` times from a fresh state; the first compiles
 (or loads Numba's cache) and is not timed. The result is one JSON line on stdout (the last).
 
+A pack (config "plies" > 1) is the peer's stacked mode ("Mode B": generate_rectangular_grid
+with n_plies and t_ply): identical layers t_ply apart along +z (ply 0 at z = 0 at the bottom,
+the top one at (plies − 1)·t_ply), every layer's edges clamped, and the sphere `gap` above the
+top layer, as its worker places them. t_ply is both the layers' spacing and the distance below
+which its penalty acts between a node and the node of the same index in the next layer.
+
 The thread count comes from NUMBA_NUM_THREADS, which the caller sets before this interpreter
 starts; the driver also calls numba.set_num_threads(config["threads"]) and reports what Numba
 actually used.
@@ -46,13 +52,19 @@ def build_inputs(cfg: dict):
         "failure_strain": cfg["failure_strain"],
         "damage_onset_strain": cfg["damage_onset_strain"],
     }
-    grid = generate_rectangular_grid(nx=n, ny=n, dx=dx, material=material, n_plies=1, t_ply=None)
-    # as worker.py, boundary_type "fixed": every edge node of the (single) layer is clamped
+    plies = int(cfg.get("plies", 1))
+    t_ply = float(cfg["t_ply"]) if plies > 1 else None  # None: one layer (n_plies = 1)
+    grid = generate_rectangular_grid(nx=n, ny=n, dx=dx, material=material, n_plies=plies,
+                                     t_ply=t_ply)
+    if grid.n_nodes != plies * n * n:
+        raise RuntimeError(f"the peer built {grid.n_nodes} nodes for {plies} × {n}²")
+    # as worker.py, boundary_type "fixed": every edge node of every layer is clamped
     mask = np.zeros(grid.n_nodes, dtype=np.int32)
-    for i in range(n):
-        for j in range(n):
-            if i == 0 or i == n - 1 or j == 0 or j == n - 1:
-                mask[i * n + j] = 1
+    for ply in range(plies):
+        for i in range(n):
+            for j in range(n):
+                if i == 0 or i == n - 1 or j == 0 or j == n - 1:
+                    mask[ply * n * n + i * n + j] = 1
     k_penalty = cfg.get("k_penalty")
     if k_penalty is None:  # the worker's default
         k_penalty = 10.0 * float(np.mean(grid.stiffnesses))
@@ -60,10 +72,23 @@ def build_inputs(cfg: dict):
     dt0 = compute_cfl_timestep(np.array([max(np.max(grid.stiffnesses), k_penalty)]),
                                grid.masses, dx, cfg["cfl_factor"])
     radius = float(cfg["radius"])
+    z_top = float(grid.nodes[:, 2].max())  # the top layer: (plies − 1)·t_ply (0: one layer)
     proj = Projectile(mass=cfg["mass"], velocity=[0.0, 0.0, -float(cfg["speed"])],
-                      position=[0.0, 0.0, radius + float(cfg["gap"])], shape_type="sphere",
-                      radius=radius)
-    return grid, mask, proj, float(k_penalty), float(dt0), dx
+                      position=[0.0, 0.0, z_top + radius + float(cfg["gap"])],
+                      shape_type="sphere", radius=radius)
+    layers = {"plies": plies, "per_layer": n * n,
+              "t_ply": t_ply if t_ply is not None else 0.002}  # 0.002: the worker's unused value
+    return grid, mask, proj, float(k_penalty), float(dt0), dx, layers
+
+
+def rest_overlaps(grid, layers: dict) -> int:
+    """Node pairs of neighbouring layers that the peer's inter-ply penalty sees as
+    penetrating in the rest state (rounding of ply·t_ply; 0 when t_ply's multiples are exact)."""
+    import numpy as np
+
+    z, m, t = grid.nodes[:, 2], layers["per_layer"], layers["t_ply"]
+    return int(sum(np.count_nonzero(z[p * m:(p + 1) * m] - z[(p + 1) * m:(p + 2) * m] + t > 0.0)
+                   for p in range(layers["plies"] - 1)))
 
 
 def run_once(cfg: dict) -> dict:
@@ -72,9 +97,10 @@ def run_once(cfg: dict) -> dict:
     from kevlargrid.solver.fused import fused_leapfrog_loop
 
     t_setup = time.perf_counter()
-    grid, mask, proj, k_penalty, dt0, dx = build_inputs(cfg)
+    grid, mask, proj, k_penalty, dt0, dx, layers = build_inputs(cfg)
     setup_s = time.perf_counter() - t_setup
     positions = grid.nodes.copy()
+    z0 = grid.nodes[:, 2].copy()  # every node's initial height
     velocities = np.zeros_like(positions)
     external = np.zeros((grid.n_nodes, 3), dtype=np.float64)
     end_time = float(cfg["end_time"])
@@ -110,7 +136,8 @@ def run_once(cfg: dict) -> dict:
             positions, velocities, grid.springs, grid.stiffnesses, grid.rest_lengths,
             grid.failed, grid.masses, grid.tension_only, mask, external,
             proj.position, proj.velocity, proj.mass, proj.blade_width, proj.edge_thickness,
-            1, grid.n_nodes, 0.002, dx, k_penalty, 0.0, float(cfg["rayleigh_beta"]),
+            layers["plies"], layers["per_layer"], layers["t_ply"], dx, k_penalty, 0.0,
+            float(cfg["rayleigh_beta"]),
             float(cfg["failure_strain"]), float(cfg["damage_onset_strain"]), 1.5, dt_est,
             n_steps, save_interval, damp, fail, clamp, t_sim, -1.0,
             grid.initial_spring_counts, grid.node_spring_offsets, grid.node_spring_ids,
@@ -126,8 +153,11 @@ def run_once(cfg: dict) -> dict:
         dts.append(dt_est)
         if first_contact is None:
             # the sheet is flat and at rest until the body touches it: the first saved frame
-            # with a node off z = 0 brackets the first contact (to save_interval steps)
-            moved = np.nonzero(np.abs(np.asarray(hist_pos)[:, :, 2]).max(axis=1) > 0.0)[0]
+            # with a node off its initial height brackets the first contact (to save_interval
+            # steps); 1e-12 m: above what rounding of the layers' heights could move a node
+            # before contact (rest_overlaps), far below a contact step's displacement
+            off = np.abs(np.asarray(hist_pos)[:, :, 2] - z0).max(axis=1)
+            moved = np.nonzero(off > (0.0 if layers["plies"] == 1 else 1e-12))[0]
             if len(moved):
                 k = int(moved[0])
                 first_contact = [float(hist_time[k - 1]) if k > 0 else last_frame_t,
@@ -147,12 +177,18 @@ def run_once(cfg: dict) -> dict:
         "dt_min_chunk": float(min(dts)), "dt_max_chunk": float(max(dts)),
         "first_contact_between": first_contact,
         "projectile_vz": float(proj.velocity[2]),
-        "max_deflection": float(-positions[:, 2].min()),
+        "max_deflection": float((z0 - positions[:, 2]).max()),
+        # per layer, from the top one (the peer's last) down, as emfabric's ply 1, 2, …
+        "max_deflection_per_ply": [
+            float((z0 - positions[:, 2])[p * layers["per_layer"]:(p + 1) * layers["per_layer"]]
+                  .max()) for p in reversed(range(layers["plies"]))],
         "max_strain_yarn": float(strain[ortho].max()),
         "failed_springs": int(np.sum(grid.failed)),
         "k_penalty": k_penalty, "k_yarn": float(grid.stiffnesses[ortho][0]),
         "node_mass_interior": float(grid.masses.max()), "node_mass_min": float(grid.masses.min()),
         "springs": int(grid.n_springs), "springs_yarn": int(np.sum(ortho)),
+        "plies": layers["plies"], "t_ply": layers["t_ply"] if layers["plies"] > 1 else None,
+        "nodes_total": int(grid.n_nodes), "rest_overlaps": rest_overlaps(grid, layers),
     }
 
 
