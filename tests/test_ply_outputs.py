@@ -56,7 +56,8 @@ def test_snapshots_name_the_ply_of_each_node_and_segment(pack_run):
     model = build_model(scenario(PACK))
     assert model.ply_count == 2
     with xr.open_dataset(pack_run / "snapshots.nc") as ds:
-        node_ply, seg_ply = ds["node_ply"].values, ds["segment_ply"].values
+        # 1-based in the file (1 is the top ply), 0-based in the model
+        node_ply, seg_ply = ds["node_ply"].values - 1, ds["segment_ply"].values - 1
         assert ds["node_ply"].dims == ("node",) and ds["segment_ply"].dims == ("segment",)
         assert node_ply.dtype == np.int32 and seg_ply.dtype == np.int32
         assert "long_name" in ds["node_ply"].attrs and "long_name" in ds["segment_ply"].attrs
@@ -112,8 +113,8 @@ def test_clipped_rotated_ply(angled_run):
     live_segments = model.yarns.stiffness != 0
     assert not live_nodes.all() and not live_segments.all()  # something is clipped
     with xr.open_dataset(angled_run / "snapshots.nc") as ds:
-        assert np.bincount(ds["node_ply"].values).tolist() == per_ply_nodes
-        assert np.bincount(ds["segment_ply"].values).tolist() == per_ply_segments
+        assert np.bincount(ds["node_ply"].values - 1).tolist() == per_ply_nodes
+        assert np.bincount(ds["segment_ply"].values - 1).tolist() == per_ply_segments
         np.testing.assert_array_equal(ds["node_carries_load"].values, live_nodes)
         np.testing.assert_array_equal(ds["segment_carries_load"].values, live_segments)
         assert np.atleast_1d(ds.attrs["ply_grid_nx"]).tolist() == [NODES, gx]

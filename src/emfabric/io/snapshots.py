@@ -4,8 +4,8 @@ Written twice over: ``snapshots.nc`` (xarray-readable, what the plotting code re
 ParaView time series ``fabric.pvd`` + ``projectile.pvd`` over ``vtk/*.vtu`` files.
 
 A pack of plies: snapshots.nc holds every node and segment of every ply, with `node_ply` and
-`segment_ply` (0-based, like the node indices of `segment_nodes`: 0 is ply 1, the top one at
-z = 0), `node_carries_load` and `segment_carries_load` (0 for the parts of a rotated ply,
+`segment_ply` (1 is the top ply, at z = 0: the numbering of the history's `ply` coordinate and
+of the ParaView `ply` fields), `node_carries_load` and `segment_carries_load` (0 for the parts of a rotated ply,
 clipped to the frame, that carry nothing: nodes of mass 0, segments of stiffness 0), and the
 attributes `plies`, `ply_grid_nx`, `ply_grid_ny` (each ply's grid; a ply's nodes are
 consecutive, in row-major order of its grid). `grid_nx`, `grid_ny` are ply 1's grid.
@@ -109,12 +109,12 @@ class Snapshots:
                                    "long_name": "node indices of each yarn segment"}),
                 "reference_position": (("node", "xyz"), m.nodes.x0.T,
                                        {"units": "m", "long_name": "node position at t = 0"}),
-                "node_ply": (("node",), m.node_ply().astype(np.int32),
+                "node_ply": (("node",), (m.node_ply() + 1).astype(np.int32),
                              {"units": "1", "long_name": "ply of each node "
-                              "(0-based: 0 is ply 1, the top one at z = 0)"}),
-                "segment_ply": (("segment",), m.segment_ply().astype(np.int32),
+                              "(1 is the top one, at z = 0)"}),
+                "segment_ply": (("segment",), (m.segment_ply() + 1).astype(np.int32),
                                 {"units": "1", "long_name": "ply of each yarn segment "
-                                 "(0-based: 0 is ply 1, the top one at z = 0)"}),
+                                 "(1 is the top one, at z = 0)"}),
                 "node_carries_load": (("node",), (m.nodes.mass != 0).astype(np.int32),
                                       {"units": "1", "long_name":
                                        "1 for a node of the sheet, 0 for a node of a clipped "

@@ -39,10 +39,11 @@ def perforated(history, status: str, end_reason: str, bound: float, back: float 
     return -1
 
 
-def plies_perforated(model, state) -> int:
-    """Plies the projectile has passed: its centre beyond, along its flight, every node of the
-    ply still held by an intact yarn (nodes torn loose and carried along do not count) by more
-    than its bounding radius."""
+def plies_perforated(model, state, history) -> int:
+    """Plies the projectile has perforated: it has passed the ply — its centre beyond, along
+    its flight, every node of the ply still held by an intact yarn (nodes torn loose and
+    carried along do not count) by more than its bounding radius — and the ply moved (a ply it
+    fell through without touching, between its yarns, is not perforated)."""
     d = model.body_v0 / max(float(np.linalg.norm(model.body_v0)), 1e-300)
     ends = model.yarns.ends
     intact = state.seg_alpha >= model.material.broken_below
@@ -56,7 +57,8 @@ def plies_perforated(model, state) -> int:
     for p in range(model.ply_count):
         sl = slice(int(model.nodes.ply_nodes[p]), int(model.nodes.ply_nodes[p + 1]))
         mine = ahead[sl][held[sl]]
-        if mine.size and float(mine.max()) < -clear:
+        moved = float(history["max_deflection_per_ply"][:, p].max()) > 0.0
+        if mine.size and float(mine.max()) < -clear and moved:
             count += 1
     return count
 
@@ -101,7 +103,7 @@ def summarize(result) -> dict[str, Any]:
                                      float(m.geometry.bound),
                                      float(m.nodes.x0[2, m.nodes.ply_nodes[-2]])),
             "plies": m.ply_count,
-            "plies_perforated": plies_perforated(m, st),
+            "plies_perforated": plies_perforated(m, st, ds),
         })
     else:
         out.update({"final_omega_rad_s": [math.nan] * 3, "residual_speed_m_s": math.nan,

@@ -455,7 +455,7 @@ def shown_segments(snapshots: xr.Dataset) -> np.ndarray:
     else:
         idx = np.arange(snapshots.sizes["segment"])
     if "segment_ply" in snapshots:
-        ply = snapshots["segment_ply"].values[idx]
+        ply = snapshots["segment_ply"].values[idx] - 1
         idx = idx[np.argsort(-ply, kind="stable")]
     return idx
 
@@ -597,7 +597,7 @@ def section_nodes(snapshots: xr.Dataset) -> list[np.ndarray]:
     ref = snapshots["reference_position"].values
     plies = ply_count(snapshots)
     n = ref.shape[0]
-    node_ply = (snapshots["node_ply"].values if "node_ply" in snapshots
+    node_ply = (snapshots["node_ply"].values - 1 if "node_ply" in snapshots
                 else np.zeros(n, dtype=np.int64))
     live = np.zeros(n, dtype=bool)
     live[shown_nodes(snapshots)] = True
