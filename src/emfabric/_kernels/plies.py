@@ -266,15 +266,12 @@ def _apply(nodes, law, x, v, f, acc, lag):
 def ply_contact(phys, x, v, f, work, lag):
     """Ply-to-ply contact of every pair of neighbouring plies at positions x and velocities v
     (changed in place); work.xbuf holds the plies' normals afterwards; f: the node forces whose
-    work the placement does, lag: the time over
-    which the scheme's position update sees a velocity change (energy bookkeeping: Δt/2 for
-    central differences). Returns (dissipation [J], placement work [J]),
-    also kept in work.ply_sums; (0, 0) for one ply."""
+    work the placement does, lag: the time over which the scheme's position update sees a
+    velocity change (energy bookkeeping: Δt/2 for central differences). Returns (dissipation
+    [J], placement work [J]); (0, 0) for one ply."""
     nodes, law = phys.nodes, phys.contact
     plies = nodes.ply_nodes.shape[0] - 1
     if plies < 2:
-        work.ply_sums[0] = 0.0
-        work.ply_sums[1] = 0.0
         return 0.0, 0.0
     box = 1
     for p in range(plies):
@@ -294,7 +291,4 @@ def ply_contact(phys, x, v, f, work, lag):
               region[p])
         _pass(phys, p + 1, p, 1.0, gap, x, v, nrm, acc, law.ply_guess[1], shares,
               region[p + 1])
-    lost, placed = _apply(nodes, law, x, v, f, acc, lag)
-    work.ply_sums[0] = lost
-    work.ply_sums[1] = placed
-    return lost, placed
+    return _apply(nodes, law, x, v, f, acc, lag)

@@ -442,9 +442,6 @@ class Work(NamedTuple):
     ply_acc: np.ndarray
     """Ply contact's exact sums per node (int64, in Contact.ply_quantum units): the impulse
     and the mass-weighted placement, (2, 3, node_count)."""
-    ply_sums: np.ndarray
-    """Ply contact's energy terms of the latest call, (2,): the dissipation and the placement
-    work [J] (plies.ply_contact)."""
 
 
 def pack_tables(grids) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -491,4 +488,4 @@ def make_work(node_count: int, row_count: int, seg_total: int, seg_count: int = 
                 np.empty((2, nmax)), np.empty((3, nmax)), np.empty((3, nmax)),
                 np.empty((3, nmax)), np.zeros((6, n)), np.empty(nmax), np.zeros((2, 3)),
                 np.zeros(seg_total), np.full(seg_total, np.nan), np.zeros((7, 3)),
-                np.zeros((2, 3, n if plies > 1 else 1), dtype=np.int64), np.zeros(2))
+                np.zeros((2, 3, n if plies > 1 else 1), dtype=np.int64))
