@@ -6,9 +6,9 @@ ParaView time series ``fabric.pvd`` + ``projectile.pvd`` over ``vtk/*.vtu`` file
 A pack of plies: snapshots.nc holds every node and segment of every ply, with `node_ply` and
 `segment_ply` (1 is the top ply, at z = 0: the numbering of the history's `ply` coordinate and
 of the ParaView `ply` fields), `node_carries_load` and `segment_carries_load` (0 for the parts
-of a rotated ply, clipped to the frame, that carry nothing: nodes of mass 0, segments of stiffness 0), and the
-attributes `plies`, `ply_grid_nx`, `ply_grid_ny` (each ply's grid; a ply's nodes are
-consecutive, in row-major order of its grid). `grid_nx`, `grid_ny` are ply 1's grid.
+of a rotated ply, clipped to the frame, that carry nothing: nodes of mass 0, segments of
+stiffness 0), and the attributes `plies`, `ply_grid_nx`, `ply_grid_ny` (each ply's grid; a
+ply's nodes are consecutive, in row-major order of its grid). `grid_nx`, `grid_ny` are ply 1's grid.
 
 The fabric's .vtu files leave out what carries nothing (renumbering the points): they hold
 the point arrays "ply" (1-based: 1 is the top ply), "node_index" (the node's index in
