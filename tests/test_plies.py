@@ -250,3 +250,16 @@ def test_builtin_packs_run(name, tmp_path):
     assert ds.broken_yarns_per_ply.dims == ("time", "ply")
     assert ds.sizes["ply"] == m.ply_count
     assert res.summary["plies"] == m.ply_count
+
+
+def test_phi_integrator_refuses_a_pack_built_in_python():
+    """A Model put together in Python bypasses the scenario check: the φ integrator itself
+    refuses a pack rather than run it without ply contact."""
+    import dataclasses
+
+    from emfabric.integrators.phi import Integrator
+
+    m = build_model(_pack())
+    m = dataclasses.replace(m, options=dataclasses.replace(m.options, integrator="phi"))
+    with pytest.raises(ValueError, match="central differences only"):
+        Integrator(m)
