@@ -4,7 +4,8 @@
 - run.py: ``run``, ``validate``, ``new``, ``scenarios``;
 - field.py: ``field`` (E and B at points, the field figure);
 - plot.py: ``plot``, ``animate``;
-- study.py: ``sweep``, ``estimate``, ``design-field``, ``ballistic-limit``.
+- study.py: ``sweep``, ``estimate``, ``design-field``, ``ballistic-limit``;
+- materials.py: ``materials`` (the material and fabric-style library).
 
 May import every other layer; nothing imports it. Heavy modules (the simulator, plotting,
 Dask) are imported inside the commands that need them, so that ``emfabric --help`` is quick.
@@ -16,7 +17,7 @@ import sys
 
 # each module registers its commands, in the order `emfabric --help` lists them
 # isort: off
-from emfabric.cli import run, field, plot, study  # noqa: F401
+from emfabric.cli import run, field, plot, study, materials  # noqa: F401
 # isort: on
 from emfabric.cli.app import app, error
 from emfabric.config.scenario import ScenarioError
