@@ -151,7 +151,7 @@ def test_damage_is_skipped_only_where_it_cannot_change(rate, u_crit, alpha, stre
 
     mat = Material(0, 0.0, u_crit, rate, 0.5)
     thr = np.empty(1)
-    damage_thresholds(np.array([alpha]), mat, thr, np.full(1, np.nan))
+    damage_thresholds(np.array([alpha]), mat, np.zeros(0), thr, np.full(1, np.nan))
     if near and 0.0 < alpha < 1.0:
         # the stretch at which the law gives back α: its own value, to round-off
         stretch = u_crit * (1.0 - math.log(alpha) / rate) * (1.0 + 1e-15 * (stretch - 1.75))
@@ -169,10 +169,10 @@ def test_damage_thresholds_follow_a_changed_alpha():
     mat = Material(0, 0.0, 1.05, 2.0, 0.5)
     alpha = np.array([1.0, 0.9, 0.5])
     thr, done = np.empty(3), np.full(3, np.nan)
-    damage_thresholds(alpha, mat, thr, done)
+    damage_thresholds(alpha, mat, np.zeros(0), thr, done)
     alpha[0], alpha[2] = 0.95, 0.0
-    damage_thresholds(alpha, mat, thr, done)
+    damage_thresholds(alpha, mat, np.zeros(0), thr, done)
     fresh = np.empty(3)
-    damage_thresholds(alpha, mat, fresh, np.full(3, np.nan))
+    damage_thresholds(alpha, mat, np.zeros(0), fresh, np.full(3, np.nan))
     np.testing.assert_array_equal(thr, fresh)
     assert thr[0] > 1.05**2 and thr[2] == np.inf

@@ -71,7 +71,8 @@ def test_new_then_run_a_custom_file(tmp_path):
     ({"fabric.nodes": [1, 5]}, "fabric.nodes.0 = 1: Input should be greater than or equal to 2"),
     ({"projectile.mass": "0.037"}, "projectile.mass = '0.037': Input should be a valid number"),
     ({"fabric.material.nope": 1}, "fabric.material.nope: unknown key; allowed keys here: H, c, "
-                                  "model, modulus_cv, seed, youngs_modulus"),
+                                  "density, failure_strain, model, modulus_cv, name, seed, "
+                                  "tensile_strength, youngs_modulus"),
     ({"contact.dynamic_friction": 2.0}, "contact = {...}: Value error, dynamic_friction = 2.0 "
      "exceeds static_friction = 1.0; allowed: dynamic_friction ≤ static_friction"),
 ])
@@ -218,9 +219,10 @@ def _check_validation_message(msg, given):
                 shown = "{...}" if isinstance(value, dict) else repr(_as_validated(value))
                 assert rest.startswith(shown + ": "), (shown, msg)
                 assert rest[len(shown) + 2:].startswith(RULES), msg
-            else:  # a rule between keys of a section: it names the key and its value
+            else:  # a rule between keys of a section (or of its sections): it names the key,
+                # by its path within the section, and its value
                 assert rest.startswith("{...}: Value error, "), msg
-                leaf, value = parts[n], flat[".".join(parts[: n + 1])]
+                leaf, value = ".".join(parts[n:]), flat[path]
                 assert any(f"{leaf} = {s}" in rest for s in _spellings(value)), (leaf, msg)
             return
     raise AssertionError(f"no line names a key path of {list(given)!r}: {msg}")

@@ -266,7 +266,8 @@ def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
     half = 0.5 * dt
     copy_into(b_out, b_in)
     # where the damage law can change α this step (materials.damage_thresholds)
-    damage_thresholds(sin.alpha, phys.material, work.damage_thr, work.damage_alpha)
+    damage_thresholds(sin.alpha, phys.material, phys.yarns.failure_stretch2,
+                      work.damage_thr, work.damage_alpha)
     # contact candidates: nodes that can reach the body within this step (from the start)
     ncand = 0
     nseg = 0
@@ -395,7 +396,8 @@ def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
     worst = 0.0
     for j in range(ny):
         worst = max(worst, sums[SUM_STIFFNESS, j])
-    d_dam = damage_release(phys.yarns, phys.material, sout.x, sin.alpha, sout.alpha)
+    d_dam = damage_release(phys.yarns, phys.material, sin.x, sout.x, sin.alpha, sout.alpha,
+                           0.5)
     energy[ENERGY_WORK_FIELD] += w_field
     energy[ENERGY_WORK_GRAVITY] += w_grav
     energy[ENERGY_FRICTION] += d_fric

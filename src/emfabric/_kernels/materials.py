@@ -10,7 +10,7 @@ import math
 
 from numba import njit
 
-from emfabric._kernels.records import MATERIAL_FUNG
+from emfabric._kernels.records import DAMAGE_BRITTLE, MATERIAL_FUNG
 
 
 @njit(cache=True, inline="always")
@@ -67,21 +67,25 @@ def strain_energy_density(u2, mat):
 
 
 @njit(cache=True)
-def damage_thresholds(alpha, mat, out, done):
-    """For each segment, the stretch² above which damage() can give less than its committed α:
-    α falls only where exp(−λ(U − U_c)/U_c) < α, i.e. U > U_c (1 − ln α / λ) — the largest
-    stretch the segment has reached past U_c. A relative margin of 1e-9 below it keeps every
-    result of damage() to the bit (near the threshold it is still evaluated). `done` holds the
-    α each threshold in `out` belongs to: only segments whose α differs are recomputed (a
+def damage_thresholds(alpha, mat, fail2, out, done):
+    """For each segment, the stretch² above which damage_above() can give less than its
+    committed α. Eq. 2.6: α falls only where exp(−λ(U − U_c)/U_c) < α, i.e. U > U_c (1 − ln α /
+    λ) — the largest stretch the segment has reached past U_c; a relative margin of 1e-9 below
+    it keeps every result of damage() to the bit (near the threshold it is still evaluated).
+    Brittle: the segment's stretch² at break fail2[s] while it is intact. `done` holds the α
+    each threshold in `out` belongs to: only segments whose α differs are recomputed (a
     logarithm each; most steps change few α)."""
     u_crit = mat.critical_stretch
     rate = mat.damage_rate
+    brittle = mat.damage_law == DAMAGE_BRITTLE
     for s in range(alpha.shape[0]):
         a = alpha[s]
         if a == done[s]:
             continue
         done[s] = a
-        if not rate > 0.0 or not a > 0.0:
+        if brittle:
+            out[s] = fail2[s] if a > 0.0 else math.inf
+        elif not rate > 0.0 or not a > 0.0:
             out[s] = math.inf  # no damage law, or broken: α cannot change
         elif a >= 1.0:
             out[s] = u_crit * u_crit  # intact: damage()'s own test
@@ -92,10 +96,12 @@ def damage_thresholds(alpha, mat, out, done):
 
 @njit(cache=True, inline="always")
 def damage_above(alpha, u2, thr2, mat):
-    """damage(alpha, u2, mat) where the stretch² thr2 (damage_thresholds) says it can change,
-    else the committed alpha: the same value, without the square root and the exponential for
-    a segment below its largest stretch so far."""
+    """The trial damage of a segment at stretch² u2 from its committed α, where the stretch² thr2
+    (damage_thresholds) says it can change, else the committed alpha: eq. 2.6 (damage()), or
+    brittle rupture, α = 0 once the stretch passes the segment's stretch at break."""
     if u2 > thr2:
+        if mat.damage_law == DAMAGE_BRITTLE:
+            return 0.0
         return damage(alpha, u2, mat)
     return alpha
 

@@ -100,6 +100,7 @@ COL_FIELD_B = HISTORY_COLUMN["field_B"]
 COL_FIELD_E = HISTORY_COLUMN["field_E"]
 
 MATERIAL_KSV, MATERIAL_FUNG = 0, 1
+DAMAGE_ZOHDI, DAMAGE_BRITTLE = 0, 1
 REGION_UNIFORM, REGION_HALF_SPACE = 0, 1
 SHAPE_SPHERE, SHAPE_OGIVE, SHAPE_CYLINDER, SHAPE_FSP = 0, 1, 2, 3
 
@@ -149,6 +150,9 @@ class Yarns(NamedTuple):
     """Undeformed cross-section A0 [m²] of the first ply (each segment's is stiffness·L0/𝔼)."""
     ply_segments: np.ndarray
     """(plies + 1,) int64: ply p's segments are ply_segments[p] ≤ s < ply_segments[p + 1]."""
+    failure_stretch2: np.ndarray = np.zeros(0)
+    """Material.damage_law = DAMAGE_BRITTLE: each segment's stretch² at break, (1 + ε_f)²,
+    (seg_count,); unused (may be empty) with DAMAGE_ZOHDI."""
 
 
 class Material(NamedTuple):
@@ -161,6 +165,9 @@ class Material(NamedTuple):
     damage_rate: float
     broken_below: float
     """α below which a yarn counts as broken (diagnostics only)."""
+    damage_law: int = DAMAGE_ZOHDI
+    """DAMAGE_ZOHDI (eq. 2.6 with critical_stretch and damage_rate) or DAMAGE_BRITTLE (α = 0
+    past Yarns.failure_stretch2)."""
 
 
 class Field(NamedTuple):

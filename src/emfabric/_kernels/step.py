@@ -133,7 +133,8 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
         else:
             fill_node_fields(phys.field, x0, v0, dt, t1, work.node_field)
     # where the damage law can change α this attempt (materials.damage_thresholds)
-    damage_thresholds(sin.alpha, phys.material, work.damage_thr, work.damage_alpha)
+    damage_thresholds(sin.alpha, phys.material, phys.yarns.failure_stretch2,
+                      work.damage_thr, work.damage_alpha)
     # the initial iterate: the start-of-step state (the paper's, ϖ_0 = 1) or the prediction
     if solver.predict:
         _predict(x0, v0, sin.f, inv_mass, phi, dt, xbuf)

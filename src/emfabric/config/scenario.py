@@ -10,6 +10,7 @@ from __future__ import annotations
 import ast
 import copy
 import json
+import math
 import re
 import tomllib
 from importlib import resources
@@ -44,19 +45,52 @@ class _Section(BaseModel):
                               use_attribute_docstrings=True)
 
 
+LIBRARY_KEYS = ("youngs_modulus", "density", "tensile_strength", "failure_strain")
+"""MaterialSpec keys a library material supplies where the scenario does not write them."""
+
+
+def _set_unset(section: BaseModel, values: dict[str, Any]) -> None:
+    """Fill a frozen section's keys the scenario did not write (its model_fields_set keeps
+    only what was written, so an override of the library name can drop what came from it)."""
+    for key, value in values.items():
+        if key not in section.model_fields_set:
+            object.__setattr__(section, key, value)
+
+
 class MaterialSpec(_Section):
+    name: str | None = None
+    """A library material (`emfabric materials`; docs/materials.md): "zylon" (the paper's),
+    "zylon-as", "kevlar-29", "kevlar-49", "kevlar-km2", "twaron", "dyneema-sk76"; it supplies
+    youngs_modulus, density, tensile_strength and failure_strain where they are not written."""
     model: Literal["kirchhoff-saint-venant", "fung"] = "kirchhoff-saint-venant"
     """Yarn law: "kirchhoff-saint-venant" (relaxed, eq. 2.4) or "fung" (section 6)."""
     youngs_modulus: PositiveFloat = 126e9
-    """Mean Young's modulus of a yarn [Pa] (KSV law)."""
+    """Mean Young's modulus of a yarn [Pa] (KSV law; default the paper's, or the library's)."""
     modulus_cv: NonNegFloat = 0.10
     """Coefficient of variation of the per-yarn modulus (Gaussian scatter)."""
     seed: Annotated[int, Field(ge=0)] = 0
-    """Seed of numpy.random.default_rng for the modulus scatter."""
+    """Seed of numpy.random.default_rng for the modulus scatter (and the strength scatter)."""
     c: PositiveFloat | None = None
     """Fung constant c [Pa] (model = "fung")."""
     H: PositiveFloat | None = None
     """Fung constant H [-] (model = "fung")."""
+    density: PositiveFloat | None = None
+    """Fibre density [kg/m³] (the library's; with a yarn linear density it gives the yarn's
+    cross-section)."""
+    tensile_strength: PositiveFloat | None = None
+    """Yarn tensile strength [Pa] (the library's; reported against the electrostatic
+    pressure)."""
+    failure_strain: PositiveFloat | None = None
+    """Engineering strain at break [-] (the library's; the default of damage.failure_strain)."""
+
+    @field_validator("name")
+    @classmethod
+    def _known_material(cls, v: str | None) -> str | None:
+        if v is not None:
+            from emfabric.config.library import library_material
+
+            library_material(v)  # ValueError naming the allowed names
+        return v
 
     @model_validator(mode="after")
     def _fung_needs_constants(self) -> MaterialSpec:
@@ -69,14 +103,39 @@ class MaterialSpec(_Section):
                 )
         return self
 
+    @model_validator(mode="after")
+    def _library_values(self) -> MaterialSpec:
+        if self.name is not None:
+            from emfabric.config.library import library_material
+
+            lib = library_material(self.name)
+            _set_unset(self, {key: getattr(lib, key) for key in LIBRARY_KEYS})
+        return self
+
 
 class Damage(_Section):
+    law: Literal["zohdi", "brittle"] | None = None
+    """"zohdi" (eq. 2.6: gradual, past critical_stretch at rate λ) or "brittle" (a yarn carries
+    load up to its failure strain, then none). Not given: the law whose keys are written
+    (failure_strain, weibull_shape: brittle; critical_stretch, rate: zohdi), else "brittle"
+    with a library material (fabric.material.name or fabric.style), else "zohdi" (the
+    paper's)."""
     critical_stretch: Annotated[float, Field(ge=1.0, allow_inf_nan=False)] = 1.03
-    """U_crit of eq. 2.6 [-]."""
+    """U_crit of eq. 2.6 [-] (law = "zohdi")."""
     rate: NonNegFloat = 0.1
-    """Damage decay parameter λ of eq. 2.6 [-]; 0 disables damage."""
+    """Damage decay parameter λ of eq. 2.6 [-]; 0 disables damage (law = "zohdi")."""
     broken_below: Annotated[float, Field(gt=0, lt=1)] = 0.01
     """A yarn whose α falls below this counts as broken in the statistics."""
+    failure_strain: PositiveFloat | None = None
+    """law = "brittle": mean engineering strain at break of a segment at the reference spacing
+    [-]; default fabric.material.failure_strain (the library's)."""
+    weibull_shape: NonNegFloat = 0.0
+    """law = "brittle": Weibull modulus m of the per-segment failure strain (0: no scatter, every
+    segment breaks at failure_strain) [-]. Seeded by fabric.material.seed."""
+
+    @property
+    def brittle(self) -> bool:
+        return self.law == "brittle"
 
 
 class Fabric(_Section):
@@ -115,6 +174,119 @@ class Fabric(_Section):
     ply: tuple[PlySpec, ...] = ()
     """Per-ply overrides ([[fabric.ply]] tables, one per ply, in order from the top): any
     fabric key that is not the frame's geometry."""
+    style: str | None = None
+    """A fabric from its datasheet (`emfabric materials`; docs/materials.md), e.g.
+    "km2-600d-plain": supplies material.name, yarn_linear_density, thread_count and
+    areal_density where they are not written."""
+    yarn_linear_density: PositiveFloat | None = None
+    """Yarn linear density [tex = g/km] (denier/9): with the fibre density (material.density)
+    it gives the yarn's cross-section, so yarn_radius = √(tex/(ρ π)) where it is not written."""
+    yarn_denier: PositiveFloat | None = None
+    """Yarn linear density in denier [g/9 km]; the same as yarn_linear_density = denier/9."""
+    thread_count: tuple[PositiveFloat, PositiveFloat] | None = None
+    """Ends and picks per cm [1/cm] (warp yarns run along x, ends/cm counted along y): the yarn
+    spacing. Where reference_nodes is not written it is one network line per yarn on this
+    sheet, and where nodes is not written the network is that one."""
+
+    @model_validator(mode="after")
+    def _datasheet(self) -> Fabric:
+        if self.style is not None:
+            from emfabric.config.library import fabric_style
+
+            st = fabric_style(self.style)
+            if self.material.name is None:
+                written = self.material.model_dump(include=self.material.model_fields_set)
+                material = MaterialSpec.model_validate({**written, "name": st.material})
+                object.__setattr__(material, "__pydantic_fields_set__",
+                                   set(self.material.model_fields_set))
+                object.__setattr__(self, "material", material)
+            given = {"yarn_linear_density", "yarn_denier"} & self.model_fields_set
+            _set_unset(self, {"areal_density": st.areal_density,
+                              "thread_count": tuple(st.thread_count)})
+            if not given:
+                _set_unset(self, {"yarn_linear_density": st.linear_density_tex})
+        if self.yarn_denier is not None:
+            if ("yarn_linear_density" in self.model_fields_set and not math.isclose(
+                    self.yarn_linear_density, self.yarn_denier / 9.0, rel_tol=1e-12)):
+                raise ValueError(
+                    f"yarn_denier = {self.yarn_denier} and yarn_linear_density = "
+                    f"{self.yarn_linear_density}: allowed: one of them (tex = denier/9)")
+            object.__setattr__(self, "yarn_linear_density", self.yarn_denier / 9.0)
+        if self.yarn_linear_density is not None:
+            rho = self.material.density
+            if rho is None:
+                raise ValueError(
+                    f"yarn_linear_density = {self.yarn_linear_density} tex needs the fibre "
+                    "density: allowed: a library material (material.name) or "
+                    "material.density [kg/m³]")
+            area = self.yarn_linear_density * 1e-6 / rho
+            _set_unset(self, {"yarn_radius": math.sqrt(area / math.pi)})
+        if self.thread_count is not None:
+            lx, ly = self.size
+            ends, picks = self.thread_count
+            lines = (max(2, round(lx * 100.0 * picks) + 1), max(2, round(ly * 100.0 * ends) + 1))
+            _set_unset(self, {"reference_nodes": lines})
+            _set_unset(self, {"nodes": self.reference_nodes})
+        return self
+
+    @model_validator(mode="after")
+    def _damage_law(self) -> Fabric:
+        dmg = self.damage
+        if dmg.law is None:
+            # not given: a key only one law reads chooses it (as the φ-scheme's keys choose the
+            # φ-scheme), else the library material's failure (brittle), else eq. 2.6
+            brittle_keys = dmg.failure_strain is not None or dmg.weibull_shape > 0.0
+            zohdi_keys = any(getattr(dmg, k) != Damage.model_fields[k].default
+                             for k in ("critical_stretch", "rate"))
+            law = ("brittle" if brittle_keys and not zohdi_keys else
+                   "zohdi" if zohdi_keys and not brittle_keys else
+                   "brittle" if self.material.name is not None else "zohdi")
+            written = dmg.model_dump(include=dmg.model_fields_set)
+            damage = Damage.model_validate({**written, "law": law})
+            object.__setattr__(damage, "__pydantic_fields_set__", set(dmg.model_fields_set))
+            object.__setattr__(self, "damage", damage)
+            dmg = damage
+        for i, table in enumerate(self.ply):
+            if table.damage is not None and table.damage.law not in (None, dmg.law):
+                raise ValueError(
+                    f"ply[{i}].damage.law = {table.damage.law!r} differs from fabric.damage.law "
+                    f"= {dmg.law!r}; allowed: one damage law for the whole pack")
+        if dmg.brittle:
+            if dmg.failure_strain is None and self.material.failure_strain is None:
+                why = ("damage.law = 'brittle'" if "law" in dmg.model_fields_set else
+                       f"damage.weibull_shape = {dmg.weibull_shape} chooses law = 'brittle', "
+                       "which")
+                raise ValueError(
+                    f"{why} needs a failure strain: allowed: damage.failure_strain, "
+                    "material.failure_strain or a library material (material.name)")
+            # (the defaults are allowed: a full scenario written out holds every key; and
+            # rate = 0, eq. 2.6 off)
+            zohdi = {k for k in ("critical_stretch", "rate")
+                     if getattr(dmg, k) not in (Damage.model_fields[k].default, 0.0)}
+            if zohdi:
+                key = sorted(zohdi)[0]
+                raise ValueError(
+                    f"damage.{key} = {getattr(dmg, key)} is a key of law = 'zohdi' (eq. 2.6); "
+                    "with law = 'brittle' a yarn breaks at failure_strain: allowed: "
+                    "failure_strain, weibull_shape")
+        else:
+            brittle = set() if dmg.failure_strain is None else {"failure_strain"}
+            if dmg.weibull_shape > 0.0:
+                brittle.add("weibull_shape")
+            if brittle:
+                key = sorted(brittle)[0]
+                raise ValueError(
+                    f"damage.{key} = {getattr(dmg, key)} is a key of law = 'brittle'; the "
+                    "law is 'zohdi' (eq. 2.6): allowed: law = 'brittle' with it, or "
+                    "critical_stretch and rate")
+        return self
+
+    def failure_strain(self) -> float | None:
+        """The brittle law's mean failure strain of this fabric (damage, else material)."""
+        if not self.damage.brittle:
+            return None
+        fs = self.damage.failure_strain
+        return fs if fs is not None else self.material.failure_strain
 
     @model_validator(mode="before")
     @classmethod
@@ -147,12 +319,14 @@ class Fabric(_Section):
                     "for the whole pack")
             if table.damage is not None:
                 for key, value in table.damage.model_dump(exclude_none=True).items():
+                    if key in ("failure_strain", "weibull_shape", "law"):
+                        continue  # per segment: a pack may mix strengths (law: _damage_law)
                     if value != getattr(self.damage, key):
                         raise ValueError(
                             f"ply[{i}].damage.{key} = {value} differs from fabric.damage."
                             f"{key} = {getattr(self.damage, key)}; allowed: one damage law "
-                            "for the whole pack (per-ply damage comes with the material "
-                            "library)")
+                            "for the whole pack (per ply: failure_strain and "
+                            "weibull_shape)")
         return self
 
     def ply_fabric(self, index: int) -> Fabric:
@@ -162,17 +336,37 @@ class Fabric(_Section):
             return self
         over = self.ply[index].model_dump(exclude_none=True)
         base = self.model_dump()
+        if "name" in over.get("material", {}):
+            # another library material: what the pack's came from its library entry is not kept
+            mat = self.material
+            kept = (mat.model_fields_set - set(LIBRARY_KEYS) if mat.name is not None
+                    else set(base["material"]) - set(LIBRARY_KEYS))
+            base["material"] = {k: v for k, v in base["material"].items() if k in kept}
         for key in ("material", "damage"):
             if key in over:
                 over[key] = {**base[key], **over[key]}
+        if ("material" in over and "yarn_radius" not in over
+                and "yarn_radius" not in self.model_fields_set
+                and self.yarn_linear_density is not None):
+            # the yarn's cross-section from its linear density and this ply's fibre density
+            rho = MaterialSpec(**over["material"]).density or self.material.density
+            over["yarn_radius"] = math.sqrt(self.yarn_linear_density * 1e-6 / rho / math.pi)
         return self.model_copy(update={**{k: (MaterialSpec(**v) if k == "material" else
                                                Damage(**v) if k == "damage" else v)
                                             for k, v in over.items()}, "ply": ()})
 
 
 class _MaterialOverride(_Section):
+    name: str | None = None
+    """A library material for this ply (its values replace those the pack's came with)."""
     model: Literal["kirchhoff-saint-venant", "fung"] | None = None
     """Must equal fabric.material.model."""
+    density: PositiveFloat | None = None
+    """Fibre density [kg/m³]."""
+    tensile_strength: PositiveFloat | None = None
+    """[Pa]."""
+    failure_strain: PositiveFloat | None = None
+    """Engineering strain at break [-]."""
     youngs_modulus: PositiveFloat | None = None
     """Mean Young's modulus of this ply's yarns [Pa]."""
     modulus_cv: NonNegFloat | None = None
@@ -186,10 +380,16 @@ class _MaterialOverride(_Section):
 
 
 class _DamageOverride(_Section):
+    law: Literal["zohdi", "brittle"] | None = None
+    """Must equal the pack's (one damage law per pack)."""
     critical_stretch: Annotated[float, Field(ge=1.0, allow_inf_nan=False)] | None = None
-    """U_crit of eq. 2.6 [-] (must equal the pack's: one damage law per pack for now)."""
+    """U_crit of eq. 2.6 [-] (must equal the pack's)."""
     rate: NonNegFloat | None = None
     """λ of eq. 2.6 [-] (must equal the pack's)."""
+    failure_strain: PositiveFloat | None = None
+    """law = "brittle": this ply's mean failure strain [-] (default its material's)."""
+    weibull_shape: NonNegFloat | None = None
+    """law = "brittle": this ply's Weibull modulus [-]."""
 
 
 class PlySpec(_Section):
@@ -990,6 +1190,20 @@ def apply_overrides(scenario: Scenario, overrides: dict[str, Any]) -> Scenario:
                                               "contact.placement"))):
         # as in a file: a key only the φ-scheme reads chooses it (SolverSpec)
         data.setdefault("solver", {}).pop("integrator", None)
+    if any(k.startswith("fabric.") for k in overrides):
+        # as in a file: what the library, a style or a datasheet key supplied is derived again
+        # from the overridden scenario (only what the scenario wrote is kept)
+        fab = scenario.fabric
+        fd = data.setdefault("fabric", {})
+        for key in ("areal_density", "yarn_radius", "reference_nodes", "nodes", "thread_count",
+                    "yarn_linear_density"):
+            if key not in fab.model_fields_set:
+                fd.pop(key, None)
+        mat = fab.material
+        fd["material"] = {k: v for k, v in fd.get("material", {}).items()
+                          if k in mat.model_fields_set or k not in (*LIBRARY_KEYS, "name")}
+        if "law" not in fab.damage.model_fields_set:
+            fd.get("damage", {}).pop("law", None)
     for key, value in overrides.items():
         parts = key.split(".")
         node = data

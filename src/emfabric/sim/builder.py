@@ -14,6 +14,8 @@ from emfabric._kernels.records import (
     BODY_R0,
     BODY_ROWS,
     BODY_X,
+    DAMAGE_BRITTLE,
+    DAMAGE_ZOHDI,
     MATERIAL_FUNG,
     MATERIAL_KSV,
     ROW_COUNT,
@@ -133,6 +135,7 @@ def _assemble(scenario: Scenario) -> Model:
     seg_rest = np.concatenate([p.rest for p in plies])
     seg_modulus = np.concatenate([p.modulus for p in plies])
     seg_stiffness = np.concatenate([p.stiffness for p in plies])
+    seg_fail2 = np.concatenate([p.fail2 for p in plies])
     rows, ply_nodes, ply_rows, ply_segments = pack_tables([p.grid for p in plies])
     nx = int(rows[:, ROW_COUNT].max())
     ny = int(rows.shape[0])
@@ -158,6 +161,7 @@ def _assemble(scenario: Scenario) -> Model:
             modulus=seg_modulus,
             area=float(plies[0].area),
             ply_segments=ply_segments,
+            failure_stretch2=seg_fail2,
         ),
         material=Material(
             kind=MATERIAL_KSV if mat.model == "kirchhoff-saint-venant" else MATERIAL_FUNG,
@@ -165,6 +169,7 @@ def _assemble(scenario: Scenario) -> Model:
             critical_stretch=float(fab.damage.critical_stretch),
             damage_rate=float(fab.damage.rate),
             broken_below=float(fab.damage.broken_below),
+            damage_law=DAMAGE_BRITTLE if fab.damage.brittle else DAMAGE_ZOHDI,
         ),
         field=build_source_grid(build_field(scenario), node_x0, scenario.field.grid_cells,
                                 scenario.field.grid_tolerance, scenario.field.grid),
@@ -223,6 +228,8 @@ class _Ply:
     area: float
     thickness: float
     """The ply's yarn radius as given (its half-thickness for ply contact) [m]."""
+    fail2: np.ndarray
+    """Brittle law: each segment's stretch² at break (failure_stretches); else empty."""
     spacing: tuple[float, float]
     """Node spacing along its weave's two directions [m]."""
     cos: float
@@ -344,8 +351,41 @@ def _ply(scenario: Scenario, index: int) -> _Ply:
         # nodes of the sheet (free edges)
         a, b = free[ends[:, 0]], free[ends[:, 1]]
         stiffness[~((a | b) if pack.edges == "clamped" else (a & b))] = 0.0
+    warp = np.arange(ends.shape[0]) < warp_a.size
+    rnx, rny = fab.reference_nodes
+    if aligned and turns % 2:
+        rnx, rny = rny, rnx
+    ref_rest = np.where(warp, su / (rnx - 1), sv / (rny - 1)) if aligned else np.where(
+        warp, lx / (fab.reference_nodes[0] - 1), ly / (fab.reference_nodes[1] - 1))
+    fail2 = failure_stretches(fab, rest, ref_rest, seed)
     return _Ply((gx, gy), x0, node_mass, node_inv_mass, node_charge, node_v0, ends, rest,
-                modulus, stiffness, float(area), float(fab.yarn_radius), (hx, hy), cos, sin)
+                modulus, stiffness, float(area), float(fab.yarn_radius), fail2, (hx, hy), cos,
+                sin)
+
+
+STRENGTH_STREAM = 1
+"""The random stream of the strength scatter (the modulus scatter draws from the seed alone)."""
+
+
+def failure_stretches(fab, rest: np.ndarray, ref_rest: np.ndarray, seed) -> np.ndarray:
+    """Each segment's stretch² at break (1 + ε_s)² under damage.law = "brittle" (empty
+    otherwise). Without scatter (weibull_shape = 0) ε_s = failure_strain. With Weibull modulus
+    m, ε_s is Weibull distributed, mean failure_strain for a segment of the reference spacing
+    ref_rest, and weakest-link scaled to other lengths: scale ∝ (L_ref/L0)^(1/m), so that a
+    coarse segment is as strong as the weakest of the reference segments it stands for and the
+    strength of a yarn does not depend on the network's resolution. Drawn from
+    default_rng([seed, STRENGTH_STREAM]) (seeded: the same draws on every run)."""
+    eps = fab.failure_strain()
+    if eps is None:
+        return np.zeros(0)
+    m = float(fab.damage.weibull_shape)
+    if m == 0.0:
+        strain = np.full(rest.shape[0], float(eps))
+    else:
+        seq = [*np.atleast_1d(seed).tolist(), STRENGTH_STREAM]
+        scale = eps / math.gamma(1.0 + 1.0 / m) * (ref_rest / rest) ** (1.0 / m)
+        strain = scale * np.random.default_rng(seq).weibull(m, rest.shape[0])
+    return (1.0 + strain) ** 2
 
 
 def _nearest(master: _Ply, x: np.ndarray) -> np.ndarray:
