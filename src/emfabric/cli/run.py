@@ -12,6 +12,7 @@ import typer
 from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
+from rich.text import Text
 
 from emfabric.cli.app import (
     app,
@@ -177,6 +178,8 @@ def _print_summary(result, as_json: bool) -> None:
     table.add_column("value", justify="right")
 
     def fmt(v) -> str:
+        if isinstance(v, list) and not v:
+            return "none"
         if isinstance(v, list):
             return "[" + ", ".join(f"{c:.4g}" for c in v) + "]"
         if isinstance(v, float):
@@ -185,6 +188,10 @@ def _print_summary(result, as_json: bool) -> None:
 
     for key, value in s.items():
         if key in ("status", "end_reason"):
+            continue
+        if isinstance(value, list) and value and all(isinstance(c, str) for c in value):
+            # text (the plausibility warnings) reads left-aligned, one item a line
+            table.add_row(key, Text("\n".join(f"• {c}" for c in value), justify="left"))
             continue
         table.add_row(key, escape(fmt(value)))
     if result.out_dir is not None:
@@ -212,8 +219,47 @@ def validate(
             f"{len(grids)} plies, {model.node_count} nodes")
     console.print(f"[green]ok[/]: {escape(sc.name)}: {pack}, "
                   f"{model.seg_count} yarn segments, projectile: {sc.projectile.shape}")
+    _print_plausibility(model)
     if show:
         emit(sc.to_commented_toml())
+
+
+def warn(message: str) -> None:
+    """A warning line on stderr, in yellow; user text is never read as markup."""
+    console.print("[yellow]warning:[/] " + escape(str(message)), highlight=False,
+                  soft_wrap=True)
+
+
+def _print_plausibility(model) -> None:
+    """validate's lines on whether the charge and the applied field are physical
+    (emfabric.sim.plausibility; docs/theory.md §3.1); its warnings in yellow."""
+    from emfabric.sim.plausibility import actuation_report
+
+    r = actuation_report(model)
+    lines = [f"charge: {r['charge_C']:.3g} C on {r['area_m2']:.3g} m²: surface charge "
+             f"σ = {r['surface_charge_C_m2']:.3g} C/m²"]
+    if r["plies"] > 1:
+        lines.append("per ply: " + ", ".join(
+            f"{q:.3g} C (σ = {s:.3g} C/m²)"
+            for q, s in zip(r["ply_charge_C"], r["ply_surface_charge_C_m2"], strict=True)))
+    lines.append(f"surface field E_s = |σ|/(2ε0) = {r['max_surface_field_V_m']:.3g} V/m: "
+                 f"{r['field_over_air_breakdown']:.3g} × air's breakdown field "
+                 f"({r['air_breakdown_V_m']:.3g} V/m), {r['field_over_material_limit']:.3g} × "
+                 f"the most any material holds ({r['material_limit_V_m']:.3g} V/m)")
+    strength = ("no yarn strength given (fabric.material.tensile_strength)"
+                if r["tensile_strength_Pa"] is None else
+                f"{r['pressure_over_strength']:.3g} × the yarn's tensile strength "
+                f"({r['tensile_strength_Pa']:.3g} Pa)")
+    lines.append(f"electrostatic pressure p = σ²/(2ε0) = {r['electrostatic_pressure_Pa']:.3g} "
+                 f"Pa: {strength}")
+    when = "" if r["peak_B_time_s"] == 0.0 else f" (at t = {r['peak_B_time_s']:.3g} s)"
+    lines.append(f"applied field at the fabric: peak |B| = {r['peak_B_T']:.3g} T{when} "
+                 f"(NdFeB remanence ≈ 1.4 T, pulsed record ≈ 100 T), peak |E| = "
+                 f"{r['peak_E_V_m']:.3g} V/m")
+    for line in lines:
+        console.print("  " + escape(line), highlight=False, soft_wrap=True)
+    for w in r["warnings"]:
+        warn(w)
 
 
 @app.command()

@@ -38,6 +38,7 @@ from emfabric.runner.summary import summarize
 from emfabric.sim.builder import build_model
 from emfabric.sim.diagnostics import check_plausible, left_for_good, limits, measure
 from emfabric.sim.model import Model
+from emfabric.sim.plausibility import log_warnings
 from emfabric.sim.state import State, initial_state
 
 ProgressFn = Callable[[State, StepInfo], None]
@@ -90,6 +91,7 @@ def run(
     default: integrators.default_threads for the problem's size); the numbers are the same.
     """
     model = scenario if isinstance(scenario, Model) else build_model(scenario)
+    log_warnings(model, log)  # is the charge physical? (emfabric.sim.plausibility)
     out = Path(out_dir) if out_dir is not None else None
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)

@@ -10,6 +10,7 @@ from typing import Any
 import numpy as np
 
 from emfabric.io.history import fabric_reference
+from emfabric.sim.plausibility import actuation_report
 
 
 def perforated(history, status: str, end_reason: str, bound: float, back: float = 0.0) -> int:
@@ -109,4 +110,13 @@ def summarize(result) -> dict[str, Any]:
         out.update({"final_omega_rad_s": [math.nan] * 3, "residual_speed_m_s": math.nan,
                     "max_tilt_rad": math.nan, "max_yaw_rad": math.nan,
                     "energy_absorbed_J": math.nan, "perforated": -1})
+    # is the actuation physical? (emfabric.sim.plausibility; docs/theory.md §3.1)
+    act = actuation_report(m)
+    out.update({
+        "surface_charge_C_m2": act["surface_charge_C_m2"],
+        "surface_field_V_m": act["max_surface_field_V_m"],
+        "electrostatic_pressure_Pa": act["electrostatic_pressure_Pa"],
+        "charge_plausible": act["charge_plausible"],
+        "plausibility_warnings": act["warnings"],
+    })
     return out
