@@ -1,0 +1,93 @@
+"""The material library and datasheet keys in a scenario (issue 24): what the library and a
+style supply, what a written key overrides, and a real fabric end to end."""
+
+import math
+
+import numpy as np
+import pytest
+
+from emfabric.config.scenario import ScenarioError, load_scenario, scenario_from_dict
+from emfabric.sim.builder import build_model
+
+from conftest import make
+
+
+def test_material_name_fills_only_what_is_not_written():
+    sc = make(**{"fabric.material.name": "kevlar-29"})
+    mat = sc.fabric.material
+    # DuPont: Kevlar 29 1.44 g/cm³, 70.5 GPa, 2920 MPa, 3.6 % (docs/materials.md)
+    assert (mat.density, mat.youngs_modulus) == (1440.0, 70.5e9)
+    assert mat.tensile_strength == pytest.approx(2.92e9)
+    assert mat.failure_strain == pytest.approx(0.036)
+    assert sc.fabric.damage.law == "brittle"  # the default with a library material
+    own = make(**{"fabric.material.name": "kevlar-29", "fabric.material.youngs_modulus": 60e9})
+    assert own.fabric.material.youngs_modulus == 60e9
+    # --set name on a scenario: the library's values follow, the written one stays
+    assert own.replace(**{"fabric.material.name": "kevlar-49"}).fabric.material.\
+        youngs_modulus == 60e9
+    other = sc.replace(**{"fabric.material.name": "dyneema-sk76"}).fabric.material
+    assert other.density == 970.0 and other.youngs_modulus == pytest.approx(120 * 0.97e9)
+    # without a library material nothing changes: the paper's Zylon and eq. 2.6
+    paper = make()
+    assert paper.fabric.material.youngs_modulus == 126e9 and paper.fabric.damage.law == "zohdi"
+    with pytest.raises(ScenarioError, match="allowed: zylon, "):
+        make(**{"fabric.material.name": "kevlar"})
+
+
+def test_style_gives_cross_section_spacing_and_network():
+    """Style 706: 600 denier (66.67 tex) KM2 at 1440 kg/m³, 34 × 34 per inch, 180 g/m²: a
+    yarn cross-section tex·1e-6/ρ, one network line per yarn (a pitch of 2.54/34 cm)."""
+    sc = make(**{"fabric.style": "km2-600d-plain", "fabric.size": [0.1, 0.1]})
+    fab = sc.fabric
+    area = 600 / 9 * 1e-6 / 1440
+    assert fab.yarn_radius == pytest.approx(math.sqrt(area / math.pi), rel=1e-12)
+    assert fab.areal_density == pytest.approx(0.180)
+    lines = round(0.1 / (0.0254 / 34)) + 1
+    assert fab.nodes == fab.reference_nodes == (lines, lines)
+    assert fab.material.name == "kevlar-km2" and fab.damage.law == "brittle"
+    assert scenario_from_dict(sc.to_dict()) == sc  # the full scenario reads back the same
+    coarse = sc.replace(**{"fabric.nodes": [41, 41]}).fabric
+    assert coarse.nodes == (41, 41) and coarse.reference_nodes == (lines, lines)
+    # the same datasheet with equal keys and no style
+    keys = make(**{"fabric.material.name": "kevlar-km2", "fabric.yarn_denier": 600.0,
+                   "fabric.thread_count": [34 / 2.54, 34 / 2.54], "fabric.size": [0.1, 0.1],
+                   "fabric.areal_density": 0.18}).fabric
+    assert keys.yarn_radius == pytest.approx(fab.yarn_radius, rel=1e-12)
+    assert keys.nodes == fab.nodes
+    # another style re-derives everything the first one supplied
+    k29 = sc.replace(**{"fabric.style": "k29-3000d-plain"}).fabric
+    assert k29.material.name == "kevlar-29"
+    assert k29.yarn_radius == pytest.approx(math.sqrt(3000 / 9 * 1e-6 / 1440 / math.pi))
+    with pytest.raises(ScenarioError, match="fibre density"):
+        make(**{"fabric.yarn_linear_density": 100.0})
+
+
+def test_a_pack_mixes_materials_and_strengths():
+    sc = make(**{"fabric.nodes": [11, 11], "fabric.material.name": "kevlar-km2",
+                 "fabric.plies": 2, "fabric.ply": [{}, {"material": {"name": "dyneema-sk76"},
+                                     "damage": {"failure_strain": 0.02}}]})
+    m = build_model(sc)
+    fail = np.sqrt(m.yarns.failure_stretch2) - 1.0
+    first, second = (fail[m.yarns.ply_segments[p]:m.yarns.ply_segments[p + 1]] for p in (0, 1))
+    assert first == pytest.approx(0.0452) and second == pytest.approx(0.02)
+    mod = m.yarns.modulus
+    assert mod[:m.yarns.ply_segments[1]].mean() == pytest.approx(84.62e9, rel=0.02)
+    assert mod[m.yarns.ply_segments[1]:].mean() == pytest.approx(116.4e9, rel=0.02)
+    with pytest.raises(ScenarioError, match="one damage law"):
+        make(**{"fabric.material.name": "kevlar-km2", "fabric.plies": 2,
+                "fabric.ply": [{}, {"damage": {"law": "zohdi"}}]})
+
+
+def test_fsp_into_a_real_fabric_breaks_yarns_at_their_failure_strain():
+    """The issue's user: style and library material, an FSP through one ply; yarns break at
+    KM2's 4.52 %: yarns break, and the largest stretch of a yarn still intact comes within
+    0.1 % of U_f = 1.0452 and never passes it; the summary says the paper's charge is not
+    physical."""
+    from emfabric.runner.loop import run
+    from emfabric.runner.summary import summarize
+
+    sc = load_scenario("km2-fsp", {"fabric.size": [0.03, 0.03], "solver.end_time": 4e-5})
+    s = summarize(run(sc, None))
+    assert s["broken_yarns"] > 0
+    assert 1.0452 * (1 - 1e-3) < s["max_stretch"] <= 1.0452
+    assert s["charge_plausible"] is False and s["plausibility_warnings"]
