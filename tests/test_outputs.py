@@ -66,6 +66,15 @@ def test_snapshots_and_paraview(small_run):
     assert (out / "projectile.pvd").exists()
 
 
+def test_paraview_files_can_be_turned_off(tmp_path):
+    """output.paraview = false: snapshots.nc as usual, no vtk/ folder and no .pvd files."""
+    run(make(**SMALL, **{"output.paraview": False}), tmp_path)
+    snap = xr.open_dataset(tmp_path / "snapshots.nc")
+    assert snap.sizes["snapshot"] == 4
+    assert not (tmp_path / "vtk").exists()
+    assert not list(tmp_path.glob("*.pvd"))
+
+
 def test_same_seed_same_history():
     """Same scenario and seed ⇒ bit-identical history; another seed ⇒ another fabric."""
     a = run(make(**SMALL)).history

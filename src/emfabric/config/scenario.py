@@ -733,6 +733,9 @@ class SolverSpec(_Section):
 class Output(_Section):
     snapshot_interval: PositiveFloat = 10e-6
     """Simulated time between snapshots [s]."""
+    paraview: bool = True
+    """Write the ParaView files (vtk/*.vtu and fabric.pvd, projectile.pvd) beside snapshots.nc;
+    false: snapshots.nc only (a 100 × 100 run writes ~1 MB of .vtu per snapshot)."""
     checkpoint_seconds: PositiveFloat = 5.0
     """Wall time between checkpoints [s]: new history records and snapshots are appended and
     checkpoint.nc is replaced (a killed run loses at most this much)."""

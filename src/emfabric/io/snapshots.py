@@ -42,10 +42,13 @@ class Snapshots:
     """The snapshots of one run: each is written to vtk/*.vtu when taken; flush() appends the
     ones taken since the last flush to snapshots.nc and rewrites the .pvd collections."""
 
-    def __init__(self, model: Model, out_dir: Path | None, times: list[float] | None = None):
-        """times: the snapshots already on disk (a resumed run)."""
+    def __init__(self, model: Model, out_dir: Path | None, times: list[float] | None = None,
+                 paraview: bool = True):
+        """times: the snapshots already on disk (a resumed run); paraview: write the .vtu and
+        .pvd files (output.paraview)."""
         self.model = model
         self.out_dir = out_dir
+        self.paraview = paraview
         self.times: list[float] = list(times or [])
         self.written = len(self.times)
         self._pending: list[tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
@@ -77,7 +80,8 @@ class Snapshots:
         snap = (state.t, state.node_x.T.copy(), state.node_v.T.copy(), state.seg_alpha.copy(),
                 state.body.copy())
         self._pending.append(snap)
-        self._write_vtk(len(self.times) - 1, snap)
+        if self.paraview:
+            self._write_vtk(len(self.times) - 1, snap)
 
     def _records(self, attrs: dict[str, str]) -> xr.Dataset:
         m = self.model
@@ -170,6 +174,8 @@ class Snapshots:
                     if ds[name].dims[:1] == ("snapshot",)})
             self.written += len(self._pending)
             self._pending.clear()
+        if not self.paraview:
+            return
         self._write_pvd("fabric")
         if self.model.has_body:
             self._write_pvd("projectile")

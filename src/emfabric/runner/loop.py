@@ -72,6 +72,11 @@ class RunResult:
     summary: dict[str, float | int | str] = field(default_factory=dict)
 
 
+def _paraview(model: Model) -> bool:
+    """Whether the run writes ParaView files (output.paraview; a Model built in Python: yes)."""
+    return model.scenario is None or model.scenario.output.paraview
+
+
 def run(
     scenario: Scenario | Model,
     out_dir: str | Path | None = None,
@@ -145,7 +150,7 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
                 run_attributes(model, "partial", "starting", 0.0)), out / "history.nc")
         s_in = initial_state(model)
         recorder = Recorder(plies=model.ply_count)
-        snaps = Snapshots(model, out)
+        snaps = Snapshots(model, out, paraview=_paraview(model))
         measure(model, s_in, recorder.new_row())
         snaps.take(s_in)
         next_snap = interval
@@ -154,7 +159,7 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
     else:
         pos, rows, times = resumed
         recorder = Recorder(rows, model.ply_count)
-        snaps = Snapshots(model, out, times)
+        snaps = Snapshots(model, out, times, paraview=_paraview(model))
         next_snap = pos.next_snapshot
         wall_before = pos.wall_time
         # records and snapshots written after the checkpoint are written again
