@@ -188,6 +188,15 @@ class Fabric(_Section):
     spacing. Where reference_nodes is not written it is one network line per yarn on this
     sheet, and where nodes is not written the network is that one."""
 
+    @field_validator("style")
+    @classmethod
+    def _known_style(cls, v: str | None) -> str | None:
+        if v is not None:
+            from emfabric.config.library import fabric_style
+
+            fabric_style(v)  # ValueError naming the allowed styles
+        return v
+
     @model_validator(mode="after")
     def _datasheet(self) -> Fabric:
         if self.style is not None:
