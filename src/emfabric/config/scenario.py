@@ -745,6 +745,9 @@ class Output(_Section):
     paraview: bool = True
     """Write the ParaView files (vtk/*.vtu and fabric.pvd, projectile.pvd) beside snapshots.nc;
     false: snapshots.nc only (a 100 × 100 run writes ~1 MB of .vtu per snapshot)."""
+    size_limit: PositiveFloat = 20e9
+    """Largest output a run may write [B] (snapshots × nodes, estimated before it starts);
+    above it the run is refused: raise it to ask for more."""
     checkpoint_seconds: PositiveFloat = 5.0
     """Wall time between checkpoints [s]: new history records and snapshots are appended and
     checkpoint.nc is replaced (a killed run loses at most this much)."""

@@ -110,6 +110,11 @@ def build_model(scenario: Scenario) -> Model:
     if outside:
         log.warning("%d of %d fabric nodes start outside the field map (they see no field "
                     "from it there)", outside, model.node_count)
+    from emfabric.sim.sanity import check_output_volume, pre_run_warnings
+
+    check_output_volume(model)
+    for line in pre_run_warnings(model):
+        log.warning("%s", line)
     return model
 
 

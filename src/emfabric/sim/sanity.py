@@ -1,0 +1,164 @@
+"""Is this run what the user meant? Checks on a built model before it runs (issue 25).
+
+Two kinds, both from numbers the scenario gives:
+
+- **Warnings** (`pre_run_warnings`): a scenario that can run but is probably a typing mistake —
+  a projectile larger than the sheet, a path that misses the sheet or leads away from it, a
+  sheet, projectile or mass far outside anything ballistic (mm or g typed as m or kg), a
+  projectile that falls between the nodes. Each says what was found and the likely fix. They
+  are warnings, not errors: a 1000 kg body standing in for a constant-speed driver, or a shot
+  fired away on purpose, are legitimate experiments.
+- **The output volume** (`output_volume`, `check_output_volume`): snapshots × (nodes and
+  segments), plus the ParaView files; a run that would write more than `output.size_limit`
+  bytes is refused before it starts (raise the limit to ask for it).
+
+`build_model` logs the warnings and applies the volume check, so `emfabric validate`, `run` and
+every study case see them.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+BALLISTIC_MASS = (1e-4, 10.0)
+"""Projectile masses [kg] we do not warn about: a 0.1 g fragment to a 10 kg body."""
+BALLISTIC_SIZE = (2e-4, 0.5)
+"""Projectile radii [m] we do not warn about."""
+SHEET_SIZE = (1e-3, 5.0)
+"""Sheet sides [m] we do not warn about."""
+BALLISTIC_SPEED = (1.0, 5000.0)
+"""Striking speeds [m/s] we do not warn about."""
+
+SNAPSHOT_BYTES_PER_NODE = 6 * 8
+"""snapshots.nc per node and snapshot: position and velocity (6 doubles) [B]."""
+SNAPSHOT_BYTES_PER_SEGMENT = 8
+"""snapshots.nc per yarn segment and snapshot: its damage [B]."""
+VTU_BYTES_PER_NODE = 112
+"""A fabric .vtu per node and snapshot (measured: a 100 × 100 sheet writes 1.1 MB per
+snapshot; points, velocity, displacement, ply, index and two line cells per node) [B]."""
+
+
+def _unit_hint(value: float, unit: str, small: str, factor: float) -> str:
+    """"did you type mm as m? (26.35 mm = 0.02635 m)"."""
+    return (f"did you type {small} as {unit}? ({value:g} {small} = {value * factor:g} {unit})")
+
+
+def pre_run_warnings(model) -> list[str]:
+    """What in this model is probably not what the user meant (see the module docstring)."""
+    sc = model.scenario
+    out: list[str] = []
+    x0 = model.nodes.x0
+    live = model.nodes.mass > 0
+    lo = x0[:2, live].min(axis=1) if live.any() else np.zeros(2)
+    hi = x0[:2, live].max(axis=1) if live.any() else np.zeros(2)
+    side = float(min(hi - lo)) if live.any() else 0.0
+    if sc is not None:
+        for length in sc.fabric.size:
+            if not SHEET_SIZE[0] <= length <= SHEET_SIZE[1]:
+                hint = _unit_hint(length, "m", "mm", 1e-3) if length > SHEET_SIZE[1] else ""
+                out.append(f"fabric.size = {list(sc.fabric.size)} m: a sheet side of {length:g} m "
+                           f"is far outside armour panels ({SHEET_SIZE[0]:g}–{SHEET_SIZE[1]:g} m)"
+                           + (f"; {hint}" if hint else ""))
+                break
+    if not model.has_body:
+        return out
+    pr = sc.projectile if sc is not None else None
+    geo = model.geometry
+    radius = float(model.body.radius)
+    mass = float(model.body.mass)
+    if pr is not None and not BALLISTIC_SIZE[0] <= radius <= BALLISTIC_SIZE[1]:
+        hint = _unit_hint(radius, "m", "mm", 1e-3) if radius > BALLISTIC_SIZE[1] else ""
+        out.append(f"projectile.radius = {radius:g} m is far outside ballistic projectiles "
+                   f"({BALLISTIC_SIZE[0]:g}–{BALLISTIC_SIZE[1]:g} m)" + (f"; {hint}" if hint
+                                                                          else ""))
+    if pr is not None and not BALLISTIC_MASS[0] <= mass <= BALLISTIC_MASS[1]:
+        hint = _unit_hint(mass, "kg", "g", 1e-3) if mass > BALLISTIC_MASS[1] else ""
+        out.append(f"projectile.mass = {mass:g} kg is far outside ballistic projectiles "
+                   f"({BALLISTIC_MASS[0]:g}–{BALLISTIC_MASS[1]:g} kg)"
+                   + (f"; {hint}" if hint else "; fine for a driver of constant speed"))
+    across = 2.0 * float(geo.bound)
+    if side > 0.0 and across > side:
+        out.append(f"the projectile ({across:.4g} m across) is larger than the sheet "
+                   f"({side:.4g} m): it strikes the frame, not the fabric"
+                   + (f"; check projectile.radius = {radius:g} m (mm as m?)" if radius > 0.1
+                      else ""))
+    v = np.asarray(model.body_v0, dtype=float)
+    speed = float(np.linalg.norm(v))
+    if pr is not None and speed > 0.0 and not BALLISTIC_SPEED[0] <= speed <= BALLISTIC_SPEED[1]:
+        out.append(f"projectile.velocity: a speed of {speed:g} m/s is far outside ballistic "
+                   f"impacts ({BALLISTIC_SPEED[0]:g}–{BALLISTIC_SPEED[1]:g} m/s)")
+    c = np.asarray(model.body_x0, dtype=float)
+    z_top = float(x0[2].max())
+    z_bottom = float(x0[2].min())
+    if speed > 0.0:
+        # where the centre's straight path crosses the sheet's plane (the top ply's)
+        plane = z_top if c[2] > z_top else z_bottom if c[2] < z_bottom else None
+        if plane is not None and (plane - c[2]) * v[2] <= 0.0:
+            out.append(f"projectile.velocity = {list(map(float, v))} m/s leads away from the "
+                       f"sheet: the projectile will never touch it (fine if on purpose)")
+        elif plane is not None:
+            t = (plane - c[2]) / v[2]
+            hit = c[:2] + t * v[:2]
+            reach = float(geo.bound)
+            if (hit < lo - reach).any() or (hit > hi + reach).any():
+                out.append(f"the projectile's path crosses the sheet's plane at x, y = "
+                           f"({hit[0]:.4g}, {hit[1]:.4g}) m, off the sheet ({lo[0]:.4g} … "
+                           f"{hi[0]:.4g}, {lo[1]:.4g} … {hi[1]:.4g} m): it will miss the "
+                           f"fabric (check projectile.position and velocity)")
+    elif pr is not None:
+        out.append("projectile.velocity = [0, 0, 0]: the projectile is at rest and touches "
+                   "the sheet only if the field or gravity drives it there")
+    # a sphere smaller than the node spacing falls between the nodes (node contact only)
+    if sc is not None and model.ply_count >= 1:
+        nx, ny = model.ply_grid(0)
+        lx, ly = sc.fabric.size
+        h = max(lx / (nx - 1), ly / (ny - 1))
+        segments = bool(model.contact.segments)
+        if not segments and across < h * math.sqrt(2.0):
+            out.append(f"the projectile ({across:.4g} m across) is smaller than the diagonal "
+                       f"of a cell of the network ({h:.4g} m spacing) and only nodes meet it "
+                       f"(contact.segments = false): it can fall between the nodes; use more "
+                       f"fabric.nodes or contact.segments = true")
+    return out
+
+
+def _snapshots(sc) -> int:
+    """Snapshots of a run to end_time: t = 0, interval, 2·interval, …"""
+    return int(sc.solver.end_time / sc.output.snapshot_interval * (1.0 + 1e-12)) + 1
+
+
+def output_volume(model) -> int:
+    """Bytes a run of this model writes (estimate): every snapshot in snapshots.nc and, with
+    output.paraview, its .vtu files; the history and checkpoint are small beside them."""
+    sc = model.scenario
+    if sc is None:
+        return 0
+    snapshots = _snapshots(sc)
+    per = (SNAPSHOT_BYTES_PER_NODE * model.node_count
+           + SNAPSHOT_BYTES_PER_SEGMENT * model.seg_count)
+    if sc.output.paraview:
+        per += VTU_BYTES_PER_NODE * model.node_count
+    return snapshots * per
+
+
+def check_output_volume(model) -> None:
+    """Refuse a run that would write more than output.size_limit bytes, naming the keys that
+    set the volume."""
+    from emfabric.config.scenario import ScenarioError
+
+    sc = model.scenario
+    if sc is None:
+        return
+    need = output_volume(model)
+    limit = sc.output.size_limit
+    if need > limit:
+        snapshots = _snapshots(sc)
+        raise ScenarioError(
+            f"output.snapshot_interval = {sc.output.snapshot_interval:g} s: {snapshots} "
+            f"snapshots of {model.node_count} nodes up to solver.end_time = "
+            f"{sc.solver.end_time:g} s would write about {need / 1e9:.3g} GB, above "
+            f"output.size_limit = {limit / 1e9:.3g} GB; allowed: a longer snapshot_interval "
+            f"(≥ {sc.solver.end_time * need / limit / snapshots:.3g} s), output.paraview = "
+            f"false, or a larger output.size_limit to ask for it")

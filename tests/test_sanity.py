@@ -1,0 +1,60 @@
+"""Plausibility before the run (issue 25 item 2): warnings for what is probably a typing
+mistake, a refusal for an output volume nobody wants."""
+
+import logging
+
+import pytest
+
+from emfabric.config.scenario import ScenarioError, builtin_names, load_scenario
+from emfabric.sim.builder import build_model
+from emfabric.sim.sanity import output_volume, pre_run_warnings
+
+from conftest import make
+
+
+@pytest.mark.parametrize("overrides, expected", [
+    ({"projectile.radius": 26.35}, "did you type mm as m? (26.35 mm = 0.02635 m)"),
+    ({"projectile.radius": 26.35}, "larger than the sheet"),
+    ({"projectile.mass": 37.0}, "did you type g as kg? (37 g = 0.037 kg)"),
+    ({"fabric.size": [254.0, 254.0]}, "did you type mm as m? (254 mm = 0.254 m)"),
+    ({"fabric.size": [254.0, 254.0]}, "can fall between the nodes"),
+    ({"projectile.position": [0.5, 0.0, 0.05]}, "it will miss the fabric"),
+    ({"projectile.velocity": [0.0, 0.0, 250.0]}, "leads away from the sheet"),
+    ({"projectile.velocity": [0.0, 0.0, -2e4]}, "far outside ballistic impacts"),
+])
+def test_typing_mistakes_are_warned_with_the_fix(overrides, expected, caplog):
+    """Each mistake of the issue's new user runs (a warning, not an error) and says why and
+    what was probably meant; the warning is logged when the model is built (validate, run)."""
+    sc = make(**{"fabric.nodes": [21, 21], **overrides})
+    with caplog.at_level(logging.WARNING, logger="emfabric"):
+        model = build_model(sc)
+    assert any(expected in w for w in pre_run_warnings(model)), pre_run_warnings(model)
+    assert any(expected in r.getMessage() for r in caplog.records)
+
+
+def test_a_heavy_driver_is_legitimate():
+    """A 1000 kg body (a constant-speed driver) is warned about, not refused."""
+    model = build_model(make(**{"fabric.nodes": [21, 21], "projectile.mass": 1000.0}))
+    (warning,) = pre_run_warnings(model)
+    assert "constant speed" in warning or "g as kg" in warning
+
+
+def test_the_builtin_scenarios_raise_no_warning():
+    for name in builtin_names():
+        assert pre_run_warnings(build_model(load_scenario(name))) == [], name
+
+
+def test_output_volume_is_refused_above_the_limit_unless_asked_for():
+    """output.snapshot_interval = 1e-9 on the paper's sheet: 1.5 million snapshots, refused
+    naming the key and the interval that fits; a larger size_limit or fewer snapshots run.
+    The default run's estimate: 151 snapshots (t = 0 … 1.5 ms every 10 µs)."""
+    sc = load_scenario("paper-field")
+    # snapshots.nc: 6 doubles a node and one a segment, .vtu 112 B a node (measured)
+    per = 48 * 10_000 + 8 * 19_800 + 112 * 10_000
+    assert output_volume(build_model(sc)) == 151 * per
+    with pytest.raises(ScenarioError, match=r"output.snapshot_interval = 1e-09 s: .* GB, "
+                                            r"above output.size_limit = 20 GB"):
+        build_model(sc.replace(**{"output.snapshot_interval": 1e-9}))
+    build_model(sc.replace(**{"output.snapshot_interval": 1e-7, "output.size_limit": 1e13}))
+    off = sc.replace(**{"output.paraview": False})
+    assert output_volume(build_model(off)) == 151 * (per - 112 * 10_000)
