@@ -204,3 +204,25 @@ def test_brittle_keys_are_checked():
     with pytest.raises(ScenarioError, match="rate"):
         fabric_only(**{"fabric.damage.law": "brittle", "fabric.damage.failure_strain": 0.03,
                        "fabric.damage.rate": 5.0})
+
+
+def test_a_projectile_carrying_a_plug_has_perforated():
+    """An FSP through one brittle ply pushes a plug of torn-out yarn ahead of it (nodes near or
+    in contact with it, joined to the frame by no intact yarn): the run ends by perforation
+    once the fabric still joined to the frame is behind it — not at end_time — and counts as
+    perforated."""
+    from emfabric.config.scenario import load_scenario
+    from emfabric.runner.loop import run
+
+    sc = load_scenario("km2-fsp", {"fabric.size": [0.03, 0.03], "field.B": [0.0, 0.0, 0.0],
+                                   "fabric.charge_per_node": 0.0, "solver.end_time": 4e-4,
+                                   "projectile.velocity": [0.0, 0.0, -250.0]})
+    res = run(sc, None)
+    assert res.end_reason == "perforation"
+    assert res.state.t < 1.5e-4
+    assert res.summary["perforated"] == 1 and res.summary["plies_perforated"] == 1
+    # fragments are still around it: the rule for a clean exit (every node behind) alone
+    # would not have stopped the run
+    st, m = res.state, res.model
+    ahead = (st.node_x - st.body_x[:, None]).T @ m.flight_direction
+    assert ahead.max() > -1.05 * m.geometry.bound

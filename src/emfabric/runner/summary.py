@@ -10,14 +10,18 @@ from typing import Any
 import numpy as np
 
 from emfabric.io.history import fabric_reference
+from emfabric.sim.diagnostics import held_nodes, through_the_pack
 from emfabric.sim.plausibility import actuation_report
 
 
-def perforated(history, status: str, end_reason: str, bound: float, back: float = 0.0) -> int:
+def perforated(history, status: str, end_reason: str, bound: float, back: float = 0.0,
+               through: bool = False) -> int:
     """1 if the run ended by perforation, or at end_time moving forward, past the pack's last
     plane (z = back; one sheet: z = 0) by more than the body's bounding radius `bound` and
-    clear of the fabric; 0 if it rebounded, never touched or moves back; -1 undecided (still in
-    contact and moving on at end_time, diverged, failed)."""
+    clear of the fabric — or, `through`, clear of every node an intact yarn still holds
+    (sim.diagnostics.through_the_pack: it carries a plug of broken yarn); 0 if it rebounded,
+    never touched or moves back; -1 undecided (still in contact and moving on at end_time,
+    diverged, failed)."""
     ds = history
     if status not in ("complete", "partial"):
         return -1
@@ -33,7 +37,7 @@ def perforated(history, status: str, end_reason: str, bound: float, back: float 
         return 1
     if end_reason in ("rebound", "never touched") or forward <= 0.0:
         return 0
-    if clear and not touching:
+    if clear and (through or not touching):
         return 1
     if not clear and not touching and int(ds["contact_nodes"].max()) == 0:
         return 0  # has not reached the sheet yet
@@ -46,12 +50,7 @@ def plies_perforated(model, state, history) -> int:
     carried along do not count) by more than its bounding radius — and the ply moved (a ply it
     fell through without touching, between its yarns, is not perforated)."""
     d = model.body_v0 / max(float(np.linalg.norm(model.body_v0)), 1e-300)
-    ends = model.yarns.ends
-    intact = state.seg_alpha >= model.material.broken_below
-    intact &= model.yarns.stiffness > 0.0
-    held = np.zeros(model.node_count, dtype=bool)
-    held[ends[intact, 0]] = True
-    held[ends[intact, 1]] = True
+    held = held_nodes(model, state.seg_alpha)
     ahead = (state.node_x - state.body_x[:, None]).T @ d
     clear = float(model.geometry.bound)
     count = 0
@@ -102,7 +101,8 @@ def summarize(result) -> dict[str, Any]:
             "energy_absorbed_J": float(ke[0] - ke[-1]),
             "perforated": perforated(ds, result.status, result.end_reason,
                                      float(m.geometry.bound),
-                                     float(m.nodes.x0[2, m.nodes.ply_nodes[-2]])),
+                                     float(m.nodes.x0[2, m.nodes.ply_nodes[-2]]),
+                                     through_the_pack(m, st)),
             "plies": m.ply_count,
             "plies_perforated": plies_perforated(m, st, ds),
         })

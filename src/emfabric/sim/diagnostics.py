@@ -181,10 +181,69 @@ def measure(model: Model, state: State, row: np.ndarray) -> FabricDiagnostics:
     return _record(model, state, row, state.energy_initial)[0]
 
 
+def held_nodes(model: Model, alpha: np.ndarray) -> np.ndarray:
+    """Nodes the fabric still holds: joined by intact yarns to a clamped node (free edges: to
+    the largest connected piece). The rest are fragments — a lone node or a piece of yarn torn
+    out — that the projectile may carry along while the fabric they came from is behind."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n = model.node_count
+    ends = model.yarns.ends
+    intact = (alpha >= model.material.broken_below) & (model.yarns.stiffness > 0.0)
+    a, b = ends[intact, 0], ends[intact, 1]
+    graph = coo_matrix((np.ones(a.size, dtype=np.int8), (a, b)), shape=(n, n))
+    _count, label = connected_components(graph, directed=False)
+    fixed = (model.nodes.inv_mass == 0.0) & (model.nodes.mass > 0.0)
+    if fixed.any():
+        anchored = np.unique(label[fixed])
+    else:
+        anchored = np.array([np.bincount(label).argmax()])
+    joined = np.zeros(n, dtype=bool)
+    joined[a] = True
+    joined[b] = True
+    return np.isin(label, anchored) & joined
+
+
+def through_the_pack(model: Model, state: State, check_every: int = 1) -> bool:
+    """Whether the projectile has gone through the fabric carrying a plug: moving forward, its
+    centre past the pack's last plane and every node still held by an intact yarn behind it by
+    more than its bounding radius, none of them following faster than it moves on. Loose
+    fragments (held_nodes: pieces no longer joined to the frame) may still touch it. A cheap
+    test first (the centre's depth), the nodes only after it, and during a run only every
+    `check_every` force evaluations (the stop is then at most that many steps late)."""
+    if not model.has_body:
+        return False
+    d = model.flight_direction
+    vb = float(state.body_v @ d)
+    clear = 1.05 * model.geometry.bound
+    back = float(model.nodes.x0[2, model.nodes.ply_nodes[-2]])
+    if not vb > 0.0 or float((state.body_x - np.array([0.0, 0.0, back])) @ d) <= clear:
+        return False
+    if check_every > 1 and int(state.evaluations) % check_every:
+        return False
+    held = held_nodes(model, state.seg_alpha)
+    if not held.any():
+        return True
+    ahead = (state.node_x[:, held] - state.body_x[:, None]).T @ d
+    follow = state.node_v[:, held].T @ d
+    return bool(ahead.max() < -clear and follow.max() < vb)
+
+
+THROUGH_EVERY = 16
+"""The stop rule looks for a projectile through the pack with a plug every this many steps."""
+
+
 def left_for_good(model: Model, state: State, fab: FabricDiagnostics) -> str | None:
     """'rebound' or 'perforation' once no node can reach the projectile any more (the run's
-    stop rule), else None."""
-    if not model.has_body or state.contact_count > 0:
+    stop rule), else None. A projectile that carries a plug of broken yarn (loose nodes still
+    in contact) has perforated once the fabric that holds together is behind it
+    (through_the_pack)."""
+    if not model.has_body:
+        return None
+    if state.contact_count > 0:
+        if state.contact_steps and through_the_pack(model, state, THROUGH_EVERY):
+            return "perforation"
         return None
     vb = float(state.body_v @ model.flight_direction)
     clear = 1.05 * model.geometry.bound
@@ -192,6 +251,8 @@ def left_for_good(model: Model, state: State, fab: FabricDiagnostics) -> str | N
         return "rebound" if state.contact_steps else "never touched"
     if vb > 0 and fab.ahead_max < -clear and fab.recede_max < vb:
         return "perforation" if state.contact_steps else "never touched"
+    if vb > 0 and state.contact_steps and through_the_pack(model, state, THROUGH_EVERY):
+        return "perforation"
     return None
 
 
