@@ -1,13 +1,17 @@
 """Scenario files round-trip (`emfabric new`, `validate --show`), and hostile input gives only
 clean errors (a fuzz test over files and --set values)."""
 
+import re
 import subprocess
 import sys
 import tomllib
+from types import UnionType
+from typing import Annotated, Union, get_args, get_origin
 
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from pydantic import BaseModel
 
 from emfabric.config.scenario import (
     Scenario,
@@ -66,15 +70,16 @@ def test_new_then_run_a_custom_file(tmp_path):
 
 
 @pytest.mark.parametrize("overrides,line", [
-    ({"solver.phi": 1.5}, "solver.phi = 1.5: Input should be less than or equal to 1"),
-    ({"fabric.edges": "open"}, "fabric.edges = 'open': must be one of 'clamped' or 'free'"),
-    ({"fabric.nodes": [1, 5]}, "fabric.nodes.0 = 1: Input should be greater than or equal to 2"),
-    ({"projectile.mass": "0.037"}, "projectile.mass = '0.037': Input should be a valid number"),
+    ({"solver.phi": 1.5}, "solver.phi = 1.5: must be from 0 to 1"),
+    ({"fabric.edges": "open"}, "fabric.edges = 'open': allowed: 'clamped', 'free'"),
+    ({"fabric.nodes": [1, 5]}, "fabric.nodes = [1, 5]: needs 2 integers [nx, ny], each ≥ 2"),
+    ({"projectile.mass": "0.037"}, "projectile.mass = '0.037': needs a number > 0 (kg), not "
+                                   "text (write 0.037 without quotes)"),
     ({"fabric.material.nope": 1}, "fabric.material.nope: unknown key; allowed keys here: H, c, "
                                   "density, failure_strain, model, modulus_cv, name, seed, "
                                   "tensile_strength, youngs_modulus"),
-    ({"contact.dynamic_friction": 2.0}, "contact = {...}: Value error, dynamic_friction = 2.0 "
-     "exceeds static_friction = 1.0; allowed: dynamic_friction ≤ static_friction"),
+    ({"contact.dynamic_friction": 2.0}, "contact = {...}: dynamic_friction = 2.0 exceeds "
+     "static_friction = 1.0; allowed: dynamic_friction ≤ static_friction"),
 ])
 def test_error_names_key_value_and_what_is_allowed(overrides, line):
     """A bad value's message is `key.path = value: what is allowed`, one line per error."""
@@ -141,45 +146,84 @@ def _build_if_small(sc: Scenario) -> None:
 
 # --- what an error message must say: the key's path, the value given there, what is allowed ---
 
-RULES = ("Input should be ", "must be one of ", "Tuple should have ", "Field required",
-         "Value error, ", "Input tag ")
-"""How a validation line states what is allowed (pydantic's wording, or the schema's own)."""
+RULES = ("needs ", "must be ", "allowed: ")
+"""How a validation line states what is allowed, in the key's own terms."""
+
+PYDANTIC_WORDS = ("Input should be", "Field required", "Value error", "Tuple should have",
+                  "Input tag", "Assertion failed", "after validation", "literal[",
+                  "function-after", "constrained-")
+"""pydantic's vocabulary, which no message shows."""
 
 
-def _flat(key, value):
-    """(dotted path, value) of a given value and of each of its parts (table keys, items)."""
-    out = [(key, value)]
+def _flat(parts, value):
+    """(path parts, value) of a given value and of each of its parts (table keys, items)."""
+    out = [(parts, value)]
     if isinstance(value, dict):
         for k, v in value.items():
-            out += _flat(f"{key}.{k}" if key else str(k), v)
+            out += _flat((*parts, k), v)
     elif isinstance(value, list | tuple):
         for i, v in enumerate(value):
-            out += _flat(f"{key}.{i}", v)
+            out += _flat((*parts, i), v)
     return out
 
 
-def _as_validated(value):
-    """The value as validation sees it: arrays as tuples (strict vectors), tables kept."""
+def _path(parts):
+    """The path as a message writes it: keys dotted, array items indexed (sources[0].kind)."""
+    out = ""
+    for part in parts:
+        out += f"[{part}]" if isinstance(part, int) else f".{part}" if out else str(part)
+    return out
+
+
+def _shown(value):
+    """A value as a message quotes it: as the file writes it, a table as {...}."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
     if isinstance(value, dict):
-        return {k: _as_validated(v) for k, v in value.items()}
+        return "{...}"
     if isinstance(value, list | tuple):
-        return tuple(_as_validated(v) for v in value)
-    return value
+        return "[" + ", ".join(_shown(v) for v in value) + "]"
+    return repr(value)
 
 
-def _section_keys(path):
-    """Sorted key names of the section that holds `path` (list indices skipped)."""
-    model = Scenario
-    for part in path.split(".")[:-1]:
-        if part.isdigit():
-            continue
-        model = _model_in(model.model_fields[part].annotation)
-    return sorted(model.model_fields)
+def _bare(ann):
+    while True:
+        if get_origin(ann) is Annotated:
+            ann = get_args(ann)[0]
+        elif get_origin(ann) in (Union, UnionType) and len(
+                [a for a in get_args(ann) if a is not type(None)]) == 1:
+            ann = next(a for a in get_args(ann) if a is not type(None))
+        else:
+            return ann
+
+
+def _table_at(parts, flat):
+    """The table type at `parts` (of a union of tables, the one its given `kind` names), or
+    None where `parts` is no table of the schema."""
+    ann = Scenario
+    for part in parts:
+        base = _bare(ann)
+        if isinstance(part, int) and get_origin(base) is tuple:
+            ann = get_args(base)[0]
+        elif isinstance(base, type) and issubclass(base, BaseModel) and part in \
+                base.model_fields:
+            ann = base.model_fields[part].annotation
+        else:
+            return None
+    base = _bare(ann)
+    if get_origin(base) in (Union, UnionType):
+        kind = flat.get((*parts, "kind"))
+        members = [_bare(m) for m in get_args(base)]
+        if not all(isinstance(m, type) and issubclass(m, BaseModel) for m in members):
+            return None
+        base = next((m for m in members if kind in get_args(
+            m.model_fields["kind"].annotation)), members[0])
+    return base if isinstance(base, type) and issubclass(base, BaseModel) else None
 
 
 def _spellings(value):
     """How a message may write a value it quotes."""
-    out = {repr(value), str(value)}
+    out = {repr(value), str(value), _shown(value)}
     if isinstance(value, int | float) and not isinstance(value, bool):
         out |= {repr(float(value)), f"{value:g}"}
     if isinstance(value, list | tuple):
@@ -189,40 +233,61 @@ def _spellings(value):
 
 def _check_validation_message(msg, given):
     """A validation error names a key path inside what was given, shows the value found there
-    and says what is allowed (for an unknown key: exactly the keys of its section)."""
+    and says what is allowed (for an unknown key: exactly the keys of its section; for a key
+    missing from a table given: a key of that table, and what it needs), in the scenario's
+    words, never pydantic's."""
     assert msg.startswith("invalid scenario ("), msg
     if msg.endswith("nested too deeply"):
         return
-    flat = dict(p for k, v in given.items() for p in _flat(k, v))
-    for path, value in flat.items():
-        # an item or key missing inside the value given: its path, the value it is missing from
-        shown = "{...}" if isinstance(value, dict) else repr(_as_validated(value))
-        missing = f"\n  {path}."
-        if missing in msg and msg.split(missing, 1)[1].split(" = ", 1)[-1].startswith(
-                shown + ": Field required"):
-            return
-    for path in flat:
-        parts = path.split(".")
-        for n in range(len(parts), 0, -1):
-            prefix = ".".join(parts[:n])
-            head = f"\n  {prefix}: unknown key; allowed keys here: "
-            if head in msg:
-                listed = msg.split(head, 1)[1].split("\n", 1)[0]
-                assert listed == ", ".join(_section_keys(prefix)), msg
+    assert not any(word in msg for word in PYDANTIC_WORDS), msg
+    flat = dict(p for k, v in given.items() for p in _flat(tuple(k.split(".")), v))
+    for parts, value in flat.items():
+        # a key missing from a table given: its path, and what it takes
+        table = _table_at(parts, flat) if isinstance(value, dict) else None
+        if table is None:
+            continue
+        for rest in msg.split(f"\n  {_path(parts)}.")[1:]:
+            child, sep, rule = rest.split("\n", 1)[0].partition(": missing; ")
+            if sep and child in table.model_fields and child not in value:
+                assert rule.startswith(RULES), msg
                 return
-            head = f"\n  {prefix} = "
+    for path in flat:
+        for n in range(len(path), 0, -1):
+            prefix = path[:n]
+            unknown = re.search(rf"\n  {re.escape(_path(prefix))}: unknown key(?: \(did you "
+                                rf"mean (.+?)\?\))?; allowed keys here: (.*)", msg)
+            if unknown:
+                table = _table_at(prefix[:-1], flat)
+                assert unknown.group(2) == ", ".join(sorted(table.model_fields)), msg
+                assert prefix[-1] not in table.model_fields, msg
+                for name in re.findall(r"'([^']+)'", unknown.group(1) or ""):
+                    assert name in table.model_fields or name in KEYS, (name, msg)
+                return
+            head = f"\n  {_path(prefix)} = "
             if head not in msg:
                 continue
-            rest = msg.split(head, 1)[1]
+            rest = msg.split(head, 1)[1].split("\n", 1)[0]
             if prefix in flat:  # the value there, as given, and the rule it breaks
-                value = flat[prefix]
-                shown = "{...}" if isinstance(value, dict) else repr(_as_validated(value))
-                assert rest.startswith(shown + ": "), (shown, msg)
-                assert rest[len(shown) + 2:].startswith(RULES), msg
+                shown = _shown(flat[prefix])
+                if rest.startswith(shown + ": "):
+                    rule = rest[len(shown) + 2:]
+                    if rule.startswith(RULES):
+                        return
+                    # a rule of the schema: on a key, it says what is allowed; on a table,
+                    # it names a key of that table
+                    table = _table_at(prefix, flat) if shown == "{...}" else None
+                    if table is None:
+                        assert "allowed" in rule.lower(), msg
+                    else:
+                        assert any(re.search(rf"\b{re.escape(k)}\b", rule)
+                                   for k in table.model_fields), msg
+                    return
+                # a rule between keys of the whole scenario: `key = value with …`, allowed
+                assert rest.startswith(shown + " ") and "allowed" in rest.lower(), (shown, msg)
             else:  # a rule between keys of a section (or of its sections): it names the key,
                 # by its path within the section, and its value
-                assert rest.startswith("{...}: Value error, "), msg
-                leaf, value = ".".join(parts[n:]), flat[path]
+                assert rest.startswith("{...}: "), msg
+                leaf, value = _path(path[n:]), flat[path]
                 assert any(f"{leaf} = {s}" in rest for s in _spellings(value)), (leaf, msg)
             return
     raise AssertionError(f"no line names a key path of {list(given)!r}: {msg}")

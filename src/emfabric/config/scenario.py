@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import ast
 import copy
+import difflib
 import json
+import logging
 import math
 import re
 import tomllib
@@ -27,6 +29,7 @@ from pydantic import (
     field_validator,
     model_validator,
 )
+from pydantic.fields import FieldInfo
 
 Vec3 = tuple[float, float, float]
 PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -224,10 +227,12 @@ class Fabric(_Section):
         if self.yarn_linear_density is not None:
             rho = self.material.density
             if rho is None:
+                given = (f"yarn_denier = {self.yarn_denier}" if self.yarn_denier is not None
+                         and "yarn_linear_density" not in self.model_fields_set else
+                         f"yarn_linear_density = {self.yarn_linear_density} tex")
                 raise ValueError(
-                    f"yarn_linear_density = {self.yarn_linear_density} tex needs the fibre "
-                    "density: allowed: a library material (material.name) or "
-                    "material.density [kg/m³]")
+                    f"{given} needs the fibre density: allowed: a library material "
+                    "(material.name) or material.density [kg/m³]")
             area = self.yarn_linear_density * 1e-6 / rho
             _set_unset(self, {"yarn_radius": math.sqrt(area / math.pi)})
         if self.thread_count is not None:
@@ -896,25 +901,33 @@ def _tomlable(obj: Any) -> Any:
     return obj
 
 
-def _format_errors(err: ValidationError, source: str) -> str:
-    """One line per error: `key.path = value: what is allowed`, the path as the user wrote it.
+def _format_errors(err: ValidationError, source: str, data: Any = None) -> str:
+    """One line per wrong key, in the scenario file's words (never pydantic's):
+    `key.path = value: what is allowed`, the path as the user writes it
+    (`field.sources[0].centre`), the value as given (an array whole: `field.B = [0.05, 0]`)
+    and what the key takes, with the unit of its docstring: "needs 3 numbers [Bx, By, Bz] in
+    T", "needs a number > 0 (kg), not text", "must be > 0 (kg)", "allowed: 'phi',
+    'central-difference'". A key missing from a table is `path: missing; needs …`; an unknown
+    key lists the keys of its section and the closest one. `data` is what was validated (for
+    the whole array an error inside it belongs to).
 
     A key of several forms (a union: "auto" or a boolean; a source table told apart by its
     `kind`) gets one line listing every allowed form, not pydantic's line per member."""
-    lines: list[str | list] = [f"invalid scenario ({source}):"]
+    lines: list[Any] = [f"invalid scenario ({source}):"]
     errors = err.errors()
     found = [_locate(e["loc"]) for e in errors]
     # a union whose value has one member's form (an error below that member's level, or its
     # own rule between keys): that member's errors say what is wrong; the other members'
-    # "should be" lines are dropped
+    # forms are dropped
     formed = [w.union_at is not None and (len(w.path) > w.union_at or e["type"] in _RULE_ERRORS)
               for e, w in zip(errors, found, strict=True)]
     deep = {tuple(w.path[:w.union_at]) for w, f in zip(found, formed, strict=True) if f}
     merged: dict[tuple, list] = {}
+    arrays: dict[tuple, _ArrayLine] = {}
     for e, where, form in zip(errors, found, formed, strict=True):
-        path = ".".join(str(p) for p in where.path)
+        path = _path_text(where.path)
         value = e.get("input")
-        shown = repr(value) if not isinstance(value, dict) else "{...}"
+        shown = _show(value)
         kind = e["type"]
         if where.union_at is not None and not form:
             key = tuple(where.path)
@@ -925,61 +938,417 @@ def _format_errors(err: ValidationError, source: str) -> str:
                 lines.append(merged[key])
             merged[key][2] += [a for a in _allowed_forms(e) if a not in merged[key][2]]
             continue
+        if where.key is not None and where.key.is_array and not (
+                kind == "missing" and len(where.path) == where.key_len):
+            # an error in or at an array of numbers: one line for the array, its value whole
+            at = tuple(where.path[:where.key_len])
+            if at not in arrays:
+                whole = _value_at(data, at)
+                if whole is _NOTHING:
+                    whole = value if len(where.path) == where.key_len or kind == "missing" \
+                        else "[...]"
+                arrays[at] = _ArrayLine(_path_text(at), whole, where.key)
+                lines.append(arrays[at])
+            arrays[at].errors.append((e, tuple(where.path[where.key_len:])))
+            continue
         if kind == "extra_forbidden":
             parent = _locate(e["loc"][:-1]).type
             allowed = sorted(parent.model_fields) if _is_model(parent) else []
-            lines.append(f"  {path}: unknown key; allowed keys here: {', '.join(allowed)}")
+            hint = _did_you_mean(where.path[-1] if where.path else None, allowed, key=True)
+            lines.append(f"  {path}: unknown key{f' ({hint})' if hint else ''}; allowed keys "
+                         f"here: {', '.join(allowed)}")
             continue
-        msg = e["msg"]
         tags = _tags(where.type, where.discriminator)
         if kind in ("union_tag_not_found", "union_tag_invalid") and tags and \
                 isinstance(value, dict):
             disc = where.discriminator
             if kind == "union_tag_not_found":
-                lines.append(f"  {path}.{disc} = {shown}: Field required; allowed: "
-                             f"{_one_of(tags)}")
+                lines.append(f"  {path}.{disc}: missing; allowed: {', '.join(tags)}")
             else:
-                lines.append(f"  {path}.{disc} = {value.get(disc)!r}: must be one of "
-                             f"{_one_of(tags)}")
+                tag = value.get(disc)
+                hint = _did_you_mean(tag, [t.strip("'") for t in tags])
+                lines.append(f"  {path}.{disc} = {_show(tag)}: allowed: {', '.join(tags)}"
+                             f"{f' ({hint})' if hint else ''}")
             continue
-        if kind == "literal_error" and "expected" in e.get("ctx", {}):
-            msg = f"must be one of {e['ctx']['expected']}"
-        elif kind in _TYPE_WORDS:
-            msg = f"Input should be {_TYPE_WORDS[kind]}"
-            if tags:
-                msg += f" with {where.discriminator} = {_one_of(tags)}"
-        lines.append(f"  {path} = {shown}: {msg}")
+        key = where.key if len(where.path) == where.key_len else None
+        spec = key if key is not None else _Key(None, where.type, (), "")
+        if kind == "missing":
+            lines.append(f"  {path}: missing; {_needs(spec)}")
+            continue
+        rule = _rule(e, spec)
+        if tags and kind in _TYPE_ERRORS:  # an array of tables told apart by a key
+            rule = (f"needs a table with {where.discriminator} = {_one_of(tags)}, "
+                    f"{_not(value, dict)}")
+        if not where.path and kind in _RULE_ERRORS:
+            lines.append(f"  {rule}")  # a rule of the whole scenario names its keys itself
+        else:
+            lines.append(f"  {path} = {shown}: {rule}")
     return "\n".join(line if isinstance(line, str) else
-                     f"  {line[0]} = {line[1]}: must be one of {_one_of(line[2])}"
-                     for line in lines)
+                     f"  {line[0]} = {line[1]}: allowed: {', '.join(line[2])}"
+                     if isinstance(line, list) else line.text() for line in lines)
 
 
 _RULE_ERRORS = ("value_error", "assertion_error")
 """Errors of a schema's own rule (a validator): the value had the form its rule checks."""
 
-_TYPE_WORDS = {"model_type": "a table", "model_attributes_type": "a table",
-               "dict_type": "a table", "tuple_type": "an array", "list_type": "an array"}
-"""The scenario file's words for pydantic's container types."""
+_TYPE_ERRORS = ("model_type", "model_attributes_type", "dict_type", "tuple_type", "list_type",
+                "float_type", "int_type", "bool_type", "string_type", "int_from_float",
+                "float_parsing", "int_parsing", "bool_parsing", "is_instance_of")
+"""Errors of a value of the wrong type (text for a number, a number for a table, …)."""
+
+_RANGE_ERRORS = ("greater_than", "greater_than_equal", "less_than", "less_than_equal")
 
 _FORM_WORDS = {"bool_type": ["true", "false"], "int_type": ["an integer"],
-               "float_type": ["a number"], "string_type": ["a string"], **{
-                   k: [v] for k, v in _TYPE_WORDS.items()}}
+               "float_type": ["a number"], "string_type": ["text in quotes"],
+               "model_type": ["a table"], "model_attributes_type": ["a table"],
+               "dict_type": ["a table"], "tuple_type": ["an array"], "list_type": ["an array"]}
 """What a union member allows, by the type of its error when the value is not of its type."""
+
+_COMPONENTS = {"nodes": ("nx", "ny"), "reference_nodes": ("nx", "ny"), "size": ("Lx", "Ly"),
+               "thread_count": ("ends", "picks"), "principal_inertia": ("I1", "I2", "I3"),
+               "table": ("t", "I")}
+"""The names of an array key's numbers, where they are not x, y, z of the key."""
+
+_SYMBOLS = {"velocity": "v", "angular_velocity": "ω", "gravity": "g", "polarization": "J",
+            "normal": "n"}
+"""The symbol of a vector key in its components' names (vx, ωz); B and E are their own;
+other vectors (position, centre, axis) are [x, y, z]."""
+
+_NOTHING = object()
+
+
+class _Key:
+    """A key of the schema: its name, annotation, constraints (annotated-types metadata) and
+    docstring (for the unit)."""
+
+    def __init__(self, name: str | None, ann: Any, meta: Any, doc: str) -> None:
+        self.name = name
+        self.ann, more = _strip(ann)
+        self.meta = [*_flat_meta(meta), *more]
+        self.doc = " ".join((doc or "").split())
+
+    @property
+    def is_array(self) -> bool:
+        """An array of numbers (or of arrays of them): its errors are reported whole."""
+        return get_origin(self.ann) is tuple and _model_in(self.ann) is None
+
+    @property
+    def unit(self) -> str | None:
+        """The unit in the docstring's first [brackets] that hold one ([-]: none)."""
+        for m in re.finditer(r"(?<![\[\w])\[([^\[\]]+)\](?!\])", self.doc):
+            unit = m.group(1).strip()
+            if any(c in unit for c in ',."\'') or len(unit) > 16:
+                continue
+            return None if unit == "-" else unit
+        return None
+
+
+class _ArrayLine:
+    """One message line for an array key and every error found in it."""
+
+    def __init__(self, path: str, value: Any, key: _Key) -> None:
+        self.path, self.value, self.key = path, value, key
+        self.errors: list[tuple[dict, tuple]] = []
+
+    def text(self) -> str:
+        finite = any(e["type"] == "finite_number" for e, _ in self.errors)
+        rule = _needs(self.key, finite=finite)
+        details = []
+        for e, sub in self.errors:
+            if e["type"] not in _TYPE_ERRORS:
+                continue
+            if not sub:  # the key itself has the wrong type: a number or a table for an array
+                if not isinstance(self.value, int | float) or isinstance(self.value, bool):
+                    rule += f", not {_kind_of(self.value)}"
+                continue
+            item = e.get("input")
+            item_type = _strip(_item_ann(self.key.ann, sub))[0]
+            what = ("not an integer" if item_type is int and isinstance(item, float)
+                    else f"{_kind_of(item)}")
+            name = _item_name(self.key, sub)
+            details.append(f"{name} is None" if item is None else
+                           f"{name} = {_show(item)} is {what}")
+        if details:
+            rule += "; " + ", ".join(details)
+        return f"  {self.path} = {_show(self.value)}: {rule}"
+
+
+def _strip(ann: Any) -> tuple[Any, list]:
+    """The type without Annotated and Optional, and the constraints Annotated held."""
+    meta: list = []
+    while True:
+        if get_origin(ann) is Annotated:
+            ann, *more = get_args(ann)
+            meta += _flat_meta(more)
+        elif _is_union(ann) and len(_members(ann)) == 1:
+            ann = _members(ann)[0]
+        else:
+            return ann, meta
+
+
+def _flat_meta(meta: Any) -> list:
+    out: list = []
+    for m in meta:
+        out += list(getattr(m, "metadata", None) or []) if isinstance(m, FieldInfo) else [m]
+    return out
+
+
+def _bounds(meta: list) -> str:
+    """"> 0", "≥ 0 and < 1", "from 1 to 64": the range the constraints allow ("": any)."""
+    lo = hi = None
+    for m in meta:
+        for attr, op in (("gt", ">"), ("ge", "≥")):
+            if getattr(m, attr, None) is not None:
+                lo = (op, _number(getattr(m, attr)))
+        for attr, op in (("lt", "<"), ("le", "≤")):
+            if getattr(m, attr, None) is not None:
+                hi = (op, _number(getattr(m, attr)))
+    if lo and hi:
+        if lo[0] == "≥" and hi[0] == "≤":
+            return f"from {lo[1]} to {hi[1]}"
+        return f"{lo[0]} {lo[1]} and {hi[0]} {hi[1]}"
+    bound = lo or hi
+    return f"{bound[0]} {bound[1]}" if bound else ""
+
+
+def _number(v: Any) -> str:
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def _noun(ann: Any, meta: list, plural: bool = False, finite: bool = False) -> str | None:
+    """What one value of a scalar type is: "a number", "integers", "true or false"."""
+    if ann is bool:
+        return "true or false"
+    if ann is int:
+        return "integers" if plural else "an integer"
+    if ann is float:
+        word = "finite numbers" if plural else "a finite number"
+        return word if finite else word.replace("finite ", "")
+    if ann is str:
+        empty = any(getattr(m, "min_length", None) for m in meta)
+        return f"{'non-empty ' if empty else ''}text in quotes"
+    if _is_model(ann) or (_is_union(ann) and all(_is_model(_strip(m)[0])
+                                                  for m in _members(ann))):
+        return "tables" if plural else "a table"
+    return None
+
+
+def _literals(ann: Any) -> list[str] | None:
+    """The values a Literal allows, as a scenario file writes them."""
+    return [_show(a) for a in get_args(ann)] if get_origin(ann) is Literal else None
+
+
+def _names(key: _Key, count: int) -> tuple[str, ...] | None:
+    """The names of an array's numbers: [Bx, By, Bz], [nx, ny], [x, y, z] (None: unknown)."""
+    names = _COMPONENTS.get(key.name or "")
+    if names is not None and len(names) == count:
+        return names
+    if count == 3 and key.name is not None:
+        sym = _SYMBOLS.get(key.name, key.name if len(key.name) <= 2 else "")
+        return tuple(f"{sym}{c}" for c in "xyz")
+    return None
+
+
+def _needs(key: _Key, finite: bool = False) -> str:
+    """What a key takes: "needs 3 numbers [Bx, By, Bz] in T", "needs a number > 0 (kg)",
+    "allowed: 'phi', 'central-difference'"."""
+    ann, unit = key.ann, key.unit
+    literals = _literals(ann)
+    if literals is not None:
+        return f"allowed: {', '.join(literals)}"
+    if _is_union(ann) and _noun(ann, []) is None:
+        forms: list[str] = []
+        for m in _members(ann):
+            base, meta = _strip(m)
+            forms += _literals(base) or (["true", "false"] if base is bool else
+                                         [_noun(base, meta) or "a value"])
+        return f"allowed: {', '.join(forms)}"
+    if get_origin(ann) is tuple:
+        args = get_args(ann)
+        if len(args) == 2 and args[1] is Ellipsis:
+            item, meta = _strip(args[0])
+            if get_origin(item) is tuple:
+                inner = get_args(item)
+                names = _names(key, len(inner))
+                what = f"[{', '.join(names)}] pairs" if names and len(inner) == 2 else \
+                    f"arrays of {len(inner)} {_noun(_strip(inner[0])[0], [], True) or 'values'}"
+                return f"needs an array of {what}"
+            noun = _noun(item, meta, plural=True, finite=finite) or "values"
+            bounds = _bounds(meta)
+            return (f"needs an array of {noun}{f' in {unit}' if unit else ''}"
+                    f"{f', each {bounds}' if bounds else ''}")
+        items = [_strip(a) for a in args]
+        same = all(i[0] is items[0][0] for i in items)
+        noun = (_noun(items[0][0], items[0][1], plural=True, finite=finite) if same else None)
+        names = _names(key, len(args))
+        bounds = _bounds(items[0][1]) if same and all(
+            _bounds(i[1]) == _bounds(items[0][1]) for i in items) else ""
+        listed = f" [{', '.join(names)}]" if names else ""
+        return (f"needs {len(args)} {noun or 'values'}{listed}"
+                f"{f' in {unit}' if unit else ''}{f', each {bounds}' if bounds else ''}")
+    noun = _noun(ann, key.meta, finite=finite)
+    if noun is None:
+        return "needs a value of another form"
+    bounds = _bounds(key.meta) if ann in (int, float) else ""
+    return f"needs {noun}{f' {bounds}' if bounds else ''}{f' ({unit})' if unit else ''}"
+
+
+def _rule(e: dict, key: _Key) -> str:
+    """What a value breaks, said in the key's terms."""
+    kind, value = e["type"], e.get("input")
+    if kind in _RULE_ERRORS:
+        msg = e["msg"]
+        for prefix in ("Value error, ", "Assertion failed, "):
+            msg = msg.removeprefix(prefix)
+        return msg
+    unit = f" ({key.unit})" if key.unit else ""
+    if kind == "literal_error":
+        literals = _literals(key.ann) or re.split(r"(?:, | or )(?=['\"])",
+                                                  e.get("ctx", {}).get("expected", "?"))
+        hint = _did_you_mean(value, [a.strip("'\"") for a in literals])
+        return f"allowed: {', '.join(literals)}{f' ({hint})' if hint else ''}"
+    if kind in _RANGE_ERRORS:
+        bounds = _bounds(key.meta) or _bounds([_Bound(e.get("ctx", {}))])
+        return f"must be {bounds}{unit}"
+    if kind == "finite_number":
+        bounds = _bounds(key.meta)
+        return f"must be a finite number{f' {bounds}' if bounds else ''}{unit}"
+    needs = _needs(key)
+    if kind in _TYPE_ERRORS:
+        return f"{needs}, {_not(value, key.ann)}"
+    return needs
+
+
+class _Bound:
+    """A constraint from an error's context (gt, ge, lt, le)."""
+
+    def __init__(self, ctx: dict) -> None:
+        for attr in ("gt", "ge", "lt", "le"):
+            setattr(self, attr, ctx.get(attr))
+
+
+def _not(value: Any, expected: Any) -> str:
+    """"not text (write 0.037 without quotes)", "not a boolean", "not 2.0 (write 2)"."""
+    if isinstance(value, str):
+        try:
+            parsed = tomllib.loads(f"v = {value.strip()}")["v"]
+        except (tomllib.TOMLDecodeError, RecursionError):
+            parsed = None
+        fits = (isinstance(parsed, bool) if expected is bool else
+                isinstance(parsed, int) and not isinstance(parsed, bool) if expected is int else
+                isinstance(parsed, int | float) and not isinstance(parsed, bool)
+                if expected is float else False)
+        return f"not text (write {value.strip()} without quotes)" if fits else "not text"
+    if expected is int and isinstance(value, float) and not isinstance(value, bool):
+        return f"not {value!r} (write {int(value)})" if value.is_integer() else \
+            f"not {_show(value)}"
+    return f"not {_kind_of(value)}"
+
+
+def _kind_of(value: Any) -> str:
+    if isinstance(value, bool):
+        return "a boolean"
+    if isinstance(value, str):
+        return "text"
+    if isinstance(value, int | float):
+        return "a number"
+    if isinstance(value, dict):
+        return "a table"
+    if isinstance(value, list | tuple):
+        return "an array"
+    return "None" if value is None else type(value).__name__
+
+
+def _item_ann(ann: Any, sub: tuple) -> Any:
+    for part in sub:
+        child, _ = _child(_strip(ann)[0], part)
+        ann = child
+    return ann
+
+
+def _item_name(key: _Key, sub: tuple) -> str:
+    """Bz, nx, or the item's place: ply_angles[1], table[0][1]."""
+    args = get_args(key.ann)
+    if len(sub) == 1 and not (len(args) == 2 and args[1] is Ellipsis):
+        names = _names(key, len(args))
+        if names is not None and 0 <= sub[0] < len(names):
+            return names[sub[0]]
+    return f"{key.name}{''.join(f'[{i}]' for i in sub)}"
+
+
+def _show(value: Any) -> str:
+    """A value as the scenario file writes it: arrays in brackets, true/false, a table as
+    {...}."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, dict):
+        return "{...}"
+    if isinstance(value, list | tuple):
+        return f"[{', '.join(_show(v) for v in value)}]"
+    return repr(value)
+
+
+def _path_text(path: list | tuple) -> str:
+    """field.sources[0].centre: keys dotted, array items indexed."""
+    out = ""
+    for part in path:
+        out += f"[{part}]" if isinstance(part, int) else f".{part}" if out else str(part)
+    return out
+
+
+def _value_at(data: Any, path: tuple) -> Any:
+    for part in path:
+        if isinstance(data, dict) and part in data:
+            data = data[part]
+        elif isinstance(data, list | tuple) and isinstance(part, int) and \
+                0 <= part < len(data):
+            data = data[part]
+        else:
+            return _NOTHING
+    return data
+
+
+def _did_you_mean(name: Any, allowed: list[str], key: bool = False) -> str:
+    """"did you mean 'areal_density'?" for a close name, or a key's place in another section
+    ("did you mean 'solver.courant'?"); "" for none."""
+    if not isinstance(name, str) or not name:
+        return ""
+    lower = {a.lower(): a for a in allowed}
+    close = difflib.get_close_matches(name.lower(), list(lower), n=1, cutoff=0.75)
+    if close:
+        return f"did you mean {lower[close[0]]!r}?"
+    elsewhere = [p for p in _key_paths() if p.rsplit(".", 1)[-1] == name] if key else []
+    if elsewhere:
+        return f"did you mean {' or '.join(repr(p) for p in elsewhere[:3])}?"
+    return ""
+
+
+def _key_paths(model: type[BaseModel] | None = None, prefix: str = "") -> list[str]:
+    """Dotted paths of the scenario's keys (the sections' tables, not the arrays of them)."""
+    out = []
+    for name, field in (model or Scenario).model_fields.items():
+        base = _strip(field.annotation)[0]
+        if _is_model(base):
+            out += _key_paths(base, f"{prefix}{name}.")
+        else:
+            out.append(f"{prefix}{name}")
+    return out
 
 
 def _allowed_forms(error: dict) -> list[str]:
     """The forms one member of a union allows, from its error on the union's value."""
     kind = error["type"]
-    if kind == "literal_error" and "expected" in error.get("ctx", {}):
+    ctx = error.get("ctx", {})
+    if kind == "literal_error" and "expected" in ctx:
         # "'a', 'b' or 'c'": each quoted value
-        return re.split(r"(?:, | or )(?=['\"])", error["ctx"]["expected"])
+        return re.split(r"(?:, | or )(?=['\"])", ctx["expected"])
     if kind in _FORM_WORDS:
         return _FORM_WORDS[kind]
-    rest = error["msg"].removeprefix("Input should be ")
-    if kind in ("greater_than", "greater_than_equal", "less_than", "less_than_equal",
-                "finite_number", "multiple_of"):
-        rest = f"a number {rest}"
-    return [rest]
+    if kind in _RANGE_ERRORS:
+        return [f"a number {_bounds([_Bound(ctx)])}"]
+    if kind == "finite_number":
+        return ["a finite number"]
+    return ["a value of another form"]
 
 
 def _one_of(forms: list[str]) -> str:
@@ -990,13 +1359,15 @@ def _one_of(forms: list[str]) -> str:
 class _Where:
     """An error's location resolved against the schema: the key path as written (pydantic's
     union member labels and tags, such as `literal['auto']`, `bool` or `loop`, dropped), the
-    type found there, the discriminator key of a tagged union there, and `union_at`: the length
-    of the path at the innermost untagged union the location passed through (None: none)."""
+    type found there, the discriminator key of a tagged union there, `union_at`: the length
+    of the path at the innermost untagged union the location passed through (None: none),
+    and the innermost key of a table on the path (`key`, at path[:key_len]; None: none)."""
 
     def __init__(self, path: list, type_: Any, discriminator: str | None,
-                 union_at: int | None) -> None:
+                 union_at: int | None, key: _Key | None = None, key_len: int = 0) -> None:
         self.path, self.type, self.discriminator, self.union_at = (path, type_, discriminator,
                                                                    union_at)
+        self.key, self.key_len = key, key_len
 
 
 def _locate(loc: tuple) -> _Where:
@@ -1004,6 +1375,7 @@ def _locate(loc: tuple) -> _Where:
     disc: str | None = None
     path: list = []
     union_at = None
+    key, key_len = None, 0
     for part in loc:
         ann, disc = _unwrap(ann, disc)
         if _is_union(ann):
@@ -1014,9 +1386,13 @@ def _locate(loc: tuple) -> _Where:
             ann, disc = _member(ann, part, disc), None
             continue
         path.append(part)
+        if _is_model(ann) and isinstance(part, str) and part in ann.model_fields:
+            field = ann.model_fields[part]
+            key = _Key(part, field.annotation, field.metadata, field.description or "")
+            key_len = len(path)
         ann, disc = _child(ann, part)
     ann, disc = _unwrap(ann, disc)
-    return _Where(path, ann, disc, union_at)
+    return _Where(path, ann, disc, union_at, key, key_len)
 
 
 def _is_union(ann: Any) -> bool:
@@ -1119,9 +1495,10 @@ def _tuples(obj: Any) -> Any:
 def scenario_from_dict(data: dict[str, Any], source: str = "<dict>") -> Scenario:
     """Validate a nested dict into a Scenario; errors name the dotted key."""
     try:
-        return Scenario.model_validate(_tuples(data))
+        validated = _tuples(data)
+        return Scenario.model_validate(validated)
     except ValidationError as err:
-        raise ScenarioError(_format_errors(err, source)) from None
+        raise ScenarioError(_format_errors(err, source, validated)) from None
     except RecursionError:
         raise ScenarioError(f"invalid scenario ({source}): values nested too deeply") from None
 
@@ -1136,18 +1513,49 @@ def builtin_text(name: str) -> str:
     folder = resources.files("emfabric.config") / "scenarios"
     path = folder / f"{name}.toml"
     if not path.is_file():
+        names = builtin_names()
+        starting = [n for n in names if len(name) >= 3 and n.startswith(name)]
+        close = list(dict.fromkeys([*starting, *difflib.get_close_matches(name, names, n=3,
+                                                                          cutoff=0.6)]))[:3]
+        hint = f"did you mean {_or(close)}? " if close else ""
         raise ScenarioError(
-            f"no built-in scenario named {name!r}; built-in: {', '.join(builtin_names())}"
-        )
+            f"no built-in scenario named {name!r} and no such file; {hint}allowed: a .toml "
+            f"file or a built-in name: {', '.join(names)} (emfabric scenarios)")
     return path.read_text(encoding="utf-8")
 
 
+def _or(names: list[str]) -> str:
+    """'a', 'b' or 'c'."""
+    return _one_of([repr(n) for n in names])
+
+
+def _no_file(path: Path) -> str:
+    """Why a scenario path is not a file to read, and what is."""
+    if path.is_dir():
+        return (f"scenario {str(path)!r} is a folder, not a TOML file; allowed: a .toml file "
+                "or a built-in name (emfabric scenarios)")
+    msg = f"scenario file {str(path)!r} does not exist"
+    if path.stem in builtin_names():
+        return f"{msg}; {path.stem!r} is a built-in scenario: give its name without .toml"
+    try:  # a file of a close name beside it
+        stems = sorted(p.stem for p in path.parent.glob("*.toml") if p.is_file())
+    except (OSError, ValueError):
+        stems = []
+    close = difflib.get_close_matches(path.stem, stems, n=1, cutoff=0.75)
+    if close:
+        return f"{msg}; did you mean {str(path.with_name(close[0] + '.toml'))!r}?"
+    return msg
+
+
 def load_scenario(source: str | Path, overrides: dict[str, Any] | None = None) -> Scenario:
-    """Load a scenario from a TOML path or a built-in name, then apply dotted overrides."""
+    """Load a scenario from a TOML path or a built-in name, then apply dotted overrides.
+
+    An empty file is the built-in defaults (the paper's field-on case) with a warning: it
+    is rarely what was meant."""
     path = Path(source)
     if path.suffix == ".toml" or path.exists():
         if not path.is_file():
-            raise ScenarioError(f"scenario file {str(path)!r} does not exist")
+            raise ScenarioError(_no_file(path))
         raw = path.read_bytes()
         label = str(path)
         try:
@@ -1165,6 +1573,11 @@ def load_scenario(source: str | Path, overrides: dict[str, Any] | None = None) -
         raise ScenarioError(f"invalid TOML in {label}: {err}") from None
     except RecursionError:
         raise ScenarioError(f"invalid TOML in {label}: arrays nested too deeply") from None
+    if not data and label == str(path):
+        what = "is empty" if not text.strip() else "has no keys (only comments)"
+        logging.getLogger(__name__).warning(
+            "scenario file %s %s: running the built-in defaults (the paper's field-on case)",
+            label, what)
     data.setdefault("name", path.stem if label == str(path) else str(source))
     scenario = scenario_from_dict(data, label)
     return apply_overrides(scenario, overrides or {})
