@@ -64,11 +64,13 @@ def test_single_run_writes_four_figures_as_png_and_pdf(field_run):
 
 
 def test_spin_figure_has_tilt_and_three_spin_components(field_run):
-    """The spin figure has one tilt line [deg] and three ω lines [rad/s] against time [µs]."""
+    """The spin figure has a tilt and a yaw line [deg] and three ω lines [rad/s] against
+    time [µs]."""
     h = plots.open_history(field_run)
     fig = plots.spin_figure([h])
     tilt_ax, *omega_axes = fig.axes
-    assert "[deg]" in tilt_ax.get_ylabel() and len(tilt_ax.lines) == 1
+    assert tilt_ax.get_ylabel() == "tilt Θ, yaw ψ [deg]" and len(tilt_ax.lines) == 2
+    np.testing.assert_allclose(tilt_ax.lines[1].get_ydata(), np.degrees(h["yaw"]))
     assert len(omega_axes) == 3
     for c, ax in enumerate(omega_axes):
         assert "[rad/s]" in ax.get_ylabel() and "xyz"[c] in ax.get_ylabel()
@@ -80,10 +82,11 @@ def test_spin_figure_has_tilt_and_three_spin_components(field_run):
 
 
 def test_overlay_doubles_the_lines(field_run, nofield_run):
-    """Two overlaid runs draw two tilt lines and six ω lines, with a legend entry per run."""
+    """Two overlaid runs draw two tilt and two yaw lines and six ω lines, with a legend entry
+    per run."""
     hs = [plots.open_history(field_run), plots.open_history(nofield_run)]
     fig = plots.spin_figure(hs, ["a", "b"])
-    assert len(fig.axes[0].lines) == 2
+    assert len(fig.axes[0].lines) == 4
     assert sum(len(ax.lines) for ax in fig.axes[1:]) == 6
     assert [t.get_text() for t in fig.legends[0].get_texts()] == ["a", "b"]
 
@@ -131,6 +134,16 @@ def test_sequence_colour_bar_spans_the_damage_shown(field_run):
         assert sheet.get_clim() == (alpha.min(), alpha.max())
         np.testing.assert_array_equal(sheet.get_array(), alpha[list(idx).index(k)])
         assert f"t = {float(s['time'][k]) * 1e6:.1f} µs" in ax.get_title()
+        assert f"ψ = {plots.snapshot_yaw_deg(s, int(k)):.2f}°" in ax.get_title()
+
+
+def test_snapshot_yaw_from_the_rotation_equals_the_history(field_run):
+    """ψ of a snapshot from its rotation and velocity is the history's yaw at that time."""
+    h = plots.open_history(field_run)
+    with plots.open_snapshots(field_run) as s:
+        for k in range(s.sizes["snapshot"]):
+            assert plots.snapshot_yaw_deg(s, k) == pytest.approx(
+                plots.snapshot_yaw_deg(s, k, h), abs=1e-6)
 
 
 def test_sequence_draws_sphere_and_nose_arrow(field_run):
@@ -236,9 +249,9 @@ def test_diverged_status_from_attributes(field_run):
 
 
 def test_plot_modules_import_nothing_from_the_simulator():
-    """plots.py and animation.py import no simulator module (source check)."""
+    """plots.py, animation.py and study_plots.py import no simulator module (source check)."""
     src = Path(plots.__file__).parent
-    for name in ("plots.py", "animation.py"):
+    for name in ("plots.py", "animation.py", "study_plots.py"):
         tree = ast.parse((src / name).read_text(encoding="utf-8"))
         imported = [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
         imported += [n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)
@@ -248,14 +261,16 @@ def test_plot_modules_import_nothing_from_the_simulator():
 
 
 def test_plot_modules_load_without_numba():
-    """Importing plots and animation (package __init__ bypassed) loads neither Numba nor kernels."""
+    """Importing the plot modules (package __init__ bypassed) loads neither Numba nor
+    kernels."""
     code = (
         "import importlib.util, sys, types\n"
         "spec = importlib.util.find_spec('emfabric')\n"
         "pkg = types.ModuleType('emfabric')\n"
         "pkg.__path__ = list(spec.submodule_search_locations)\n"
         "sys.modules['emfabric'] = pkg\n"
-        "import emfabric.viz.plots, emfabric.viz.animation\n"
+        "import emfabric.viz.plots, emfabric.viz.animation, emfabric.viz.study_plots\n"
+        "import emfabric.viz.field_plot\n"
         f"bad = [m for m in sys.modules if m.startswith({SIMULATOR!r})]\n"
         "assert not bad, bad\n"
     )

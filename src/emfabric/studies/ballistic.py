@@ -221,7 +221,27 @@ def ballistic_limit(scenario: Scenario, out, *, seeds: int = 0, tolerance: float
             cluster.close()
     result["shots"] = shots
     result["runs"] = len(shots)
+    result["scenario"] = scenario.name
+    result["non_monotone"] = non_monotone(shots, result["v_bl"])
     return result
+
+
+def non_monotone(shots: list[dict[str, Any]], v_bl: float) -> list[dict[str, Any]]:
+    """The outcomes of the scenario as given (seeded shots scatter by design: left out) that a
+    sharp ballistic limit cannot explain: each stopped shot faster than a perforating one, as
+    {"stopped": its speed, "perforated": the fastest perforating speed below it}, and a
+    stopped shot above `v_bl` with no perforating shot below it, with "perforated": None;
+    by the stopped speed [m/s]."""
+    det = [s for s in shots if s["seed"] is None]
+    perf = sorted(float(s["speed"]) for s in det if s["perforated"] == 1)
+    out: list[dict[str, Any]] = []
+    for v in sorted(float(s["speed"]) for s in det if s["perforated"] == 0):
+        below = [p for p in perf if p < v]
+        if below:
+            out.append({"stopped": v, "perforated": below[-1]})
+        elif v > v_bl:
+            out.append({"stopped": v, "perforated": None})
+    return out
 
 
 def _node_spacing(scenario: Scenario) -> np.ndarray:

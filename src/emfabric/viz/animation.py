@@ -2,7 +2,7 @@
 
 Frames are rendered one at a time on a single Agg figure whose artists are updated in place,
 and each frame goes straight to the encoders (ffmpeg from imageio-ffmpeg), so memory does not
-grow with the number of snapshots. Reads ``snapshots.nc`` (and ``history.nc`` for the tilt)
+grow with the number of snapshots. Reads ``snapshots.nc`` (and ``history.nc`` for the tilt and yaw)
 only; never imports the simulator.
 """
 
@@ -34,6 +34,7 @@ from emfabric.viz.plots import (
     scene_limits,
     shown_segments,
     snapshot_tilt_deg,
+    snapshot_yaw_deg,
     status_note,
     yarn_linewidth,
 )
@@ -59,10 +60,12 @@ def render_frames(snapshots: xr.Dataset, history: xr.Dataset | None = None,
     """Yield one RGB frame (uint8, shape (height, width, 3)) per snapshot, rendered lazily.
 
     The colour range is the damage range over the whole run (fixed for the movie); the title
-    carries the time and the tilt Θ, and the run's status when it did not complete. A pack of
-    plies: the 3-D view is shortened and the plies' section (``SectionView``) runs under it.
+    carries the time, the tilt Θ and the yaw ψ, and the run's status when it did not
+    complete. A pack of plies: the 3-D view is shortened and the plies' section
+    (``SectionView``) runs under it.
     """
     count = snapshots.sizes["snapshot"]
+    body = bool(int(snapshots.attrs.get("has_projectile", 1)))
     meta = history if history is not None else snapshots
     name, note = run_name(meta), status_note(meta)
     norm = Normalize(*damage_range_all(snapshots))
@@ -85,6 +88,8 @@ def render_frames(snapshots: xr.Dataset, history: xr.Dataset | None = None,
         t = float(snapshots["time"][k]) * 1e6
         text = (f"{name}    t = {t:7.2f} µs    tilt Θ = "
                 f"{snapshot_tilt_deg(snapshots, k, history):6.2f}°")
+        if body:
+            text += f"    yaw ψ = {snapshot_yaw_deg(snapshots, k, history):6.2f}°"
         # the style is entered per frame, never held across a yield
         with matplotlib.rc_context(STYLE):
             view.update(snapshots, k)

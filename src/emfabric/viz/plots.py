@@ -303,17 +303,23 @@ def _as_list(histories) -> list[xr.Dataset]:
 
 def spin_figure(histories: Sequence[xr.Dataset] | xr.Dataset,
                 labels: Sequence[str] | None = None) -> Figure:
-    """Tilt Θ [deg] and ω_x, ω_y, ω_z [rad/s] against time (paper Figs. 7, 9, 12).
+    """Tilt Θ and yaw ψ [deg], and ω_x, ω_y, ω_z [rad/s] against time (paper Figs. 7, 9, 12).
 
     Four stacked axes sharing the time axis, one line per run on each, so a small component
-    (Fig. 12's ω_y next to ω_z = 10⁴ rad/s) stays readable.
+    (Fig. 12's ω_y next to ω_z = 10⁴ rad/s) stays readable. The top axis holds the tilt Θ
+    (the nose marker from its initial direction, eq. 5.2) and the yaw ψ (the body axis from
+    the velocity, docs/shapes.md), both in degrees; a history without `yaw` (written before
+    it was recorded) draws the tilt alone.
     """
     histories = _as_list(histories)
     with matplotlib.rc_context(STYLE):
         fig = new_figure((8.0, 9.0))
         axes = fig.subplots(4, 1, sharex=True)
-        tilt = _Series("tilt Θ", lambda ds: np.degrees(ds["tilt"].values), "k")
-        _panel(axes[0], histories, [tilt], colour_by="run", ylabel="tilt Θ [deg]")
+        angles = [_Series("tilt Θ", lambda ds: np.degrees(ds["tilt"].values), "k")]
+        if any("yaw" in ds for ds in histories):
+            angles.append(_Series("yaw ψ", _yaw_deg, "tab:purple"))
+        _panel(axes[0], histories, angles, colour_by="run",
+               ylabel="tilt Θ, yaw ψ [deg]" if len(angles) > 1 else "tilt Θ [deg]")
         for c, ax in enumerate(axes[1:]):
             axis = "xyz"[c]
             s = _Series(f"ω_{axis}", lambda ds, c=c: ds["angular_velocity"].values[:, c],
@@ -322,6 +328,13 @@ def spin_figure(histories: Sequence[xr.Dataset] | xr.Dataset,
         _field_overlay(axes[0], histories)
         _finish(fig, axes, "tilt and spin of the projectile", histories, labels, "run")
     return fig
+
+
+def _yaw_deg(ds: xr.Dataset) -> np.ndarray:
+    """The history's yaw ψ [deg] (NaN where the history has none)."""
+    if "yaw" not in ds:
+        return np.full(ds.sizes["time"], np.nan)
+    return np.degrees(ds["yaw"].values)
 
 
 def _field_overlay(ax, histories: Sequence[xr.Dataset]) -> None:
@@ -683,6 +696,18 @@ def snapshot_tilt_deg(snapshots: xr.Dataset, k: int, history: xr.Dataset | None 
     return math.degrees(math.atan2(np.linalg.norm(np.cross(now, ref)), float(now @ ref)))
 
 
+def snapshot_yaw_deg(snapshots: xr.Dataset, k: int, history: xr.Dataset | None = None) -> float:
+    """Yaw ψ [deg] at snapshot ``k`` (the body axis from the velocity): from the history's
+    `yaw` at that time, else from the snapshot's rotation and velocity (0 at rest)."""
+    t = float(snapshots["time"][k])
+    if history is not None and "yaw" in history and history.sizes.get("time", 0):
+        return float(np.degrees(np.interp(t, history["time"].values, history["yaw"].values)))
+    axis = snapshots["projectile_rotation"][k].values @ snapshots["projectile_nose_body"].values
+    v = (snapshots["projectile_velocity"][k].values if "projectile_velocity" in snapshots
+         else np.zeros(3))
+    return math.degrees(math.atan2(np.linalg.norm(np.cross(axis, v)), float(axis @ v)))
+
+
 def damage_colourbar(fig: Figure, norm: Normalize, cax) -> None:
     """The one colour bar of a figure: α over the range reached, red = least damaged."""
     bar = fig.colorbar(ScalarMappable(norm=norm, cmap=DAMAGE_CMAP), cax=cax)
@@ -728,8 +753,10 @@ def sequence_figure(snapshots: xr.Dataset, count: int = 6, history: xr.Dataset |
                 ax = fig.add_subplot(nrows, ncols, p + 1, projection="3d")
             SheetView(ax, snapshots, norm, limits).update(snapshots, int(k))
             t = float(snapshots["time"][k]) * _US
-            ax.set_title(f"t = {t:.1f} µs,  Θ = {snapshot_tilt_deg(snapshots, k, history):.2f}°",
-                         fontsize=10)
+            angles = f"Θ = {snapshot_tilt_deg(snapshots, k, history):.2f}°"
+            if int(snapshots.attrs.get("has_projectile", 1)):
+                angles += f",  ψ = {snapshot_yaw_deg(snapshots, k, history):.2f}°"
+            ax.set_title(f"t = {t:.1f} µs,  {angles}", fontsize=10)
         if pack:
             fig.subplots_adjust(left=0.06, right=0.86, bottom=0.1 / nrows, top=0.9,
                                 wspace=0.25, hspace=0.3)
