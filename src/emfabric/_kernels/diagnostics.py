@@ -250,3 +250,35 @@ def history_row(step, b_state, body, diag, energy, e_initial, contact_force, row
     for c in range(3):
         row[COL_CONTACT_FORCE + c] = contact_force[c]
     return e0
+
+
+@njit(cache=True)
+def _root(parent, i):
+    while parent[i] != i:
+        parent[i] = parent[parent[i]]
+        i = parent[i]
+    return i
+
+
+@njit(cache=True)
+def joined_to(ends, intact, anchor, out):
+    """out[n] = whether node n is joined through intact segments to an anchor node (union-find
+    over the intact segments; anchor and out: (node_count,) bool). A node with no intact
+    segment is joined to nothing (not even when it is an anchor)."""
+    n = anchor.shape[0]
+    parent = np.arange(n)
+    touched = np.zeros(n, dtype=np.bool_)
+    for s in range(ends.shape[0]):
+        if intact[s]:
+            a = _root(parent, ends[s, 0])
+            b = _root(parent, ends[s, 1])
+            touched[ends[s, 0]] = True
+            touched[ends[s, 1]] = True
+            if a != b:
+                parent[max(a, b)] = min(a, b)
+    held = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        if anchor[i] and touched[i]:
+            held[_root(parent, i)] = True
+    for i in range(n):
+        out[i] = touched[i] and held[_root(parent, i)]

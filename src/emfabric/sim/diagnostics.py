@@ -183,26 +183,28 @@ def measure(model: Model, state: State, row: np.ndarray) -> FabricDiagnostics:
 
 def held_nodes(model: Model, alpha: np.ndarray) -> np.ndarray:
     """Nodes the fabric still holds: joined by intact yarns to a clamped node (free edges: to
-    the largest connected piece). The rest are fragments — a lone node or a piece of yarn torn
-    out — that the projectile may carry along while the fabric they came from is behind."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    n = model.node_count
+    the node that stays joined to most, found as the largest piece). The rest are fragments — a
+    lone node or a piece of yarn torn out — that the projectile may carry along while the
+    fabric they came from is behind."""
     ends = model.yarns.ends
     intact = (alpha >= model.material.broken_below) & (model.yarns.stiffness > 0.0)
-    a, b = ends[intact, 0], ends[intact, 1]
-    graph = coo_matrix((np.ones(a.size, dtype=np.int8), (a, b)), shape=(n, n))
-    _count, label = connected_components(graph, directed=False)
     fixed = (model.nodes.inv_mass == 0.0) & (model.nodes.mass > 0.0)
+    out = np.zeros(model.node_count, dtype=bool)
     if fixed.any():
-        anchored = np.unique(label[fixed])
-    else:
-        anchored = np.array([np.bincount(label).argmax()])
-    joined = np.zeros(n, dtype=bool)
-    joined[a] = True
-    joined[b] = True
-    return np.isin(label, anchored) & joined
+        _k.joined_to(ends, intact, fixed, out)
+        return out
+    # free edges: the largest piece (each node's piece found by joining it alone)
+    best = np.zeros(model.node_count, dtype=bool)
+    left = np.zeros(model.node_count, dtype=bool)
+    left[ends[intact].ravel()] = True
+    while left.any():
+        seed = np.zeros(model.node_count, dtype=bool)
+        seed[int(np.flatnonzero(left)[0])] = True
+        _k.joined_to(ends, intact, seed, out)
+        if out.sum() > best.sum():
+            best = out.copy()
+        left &= ~out
+    return best
 
 
 def through_the_pack(model: Model, state: State, check_every: int = 1) -> bool:
