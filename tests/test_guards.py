@@ -105,6 +105,7 @@ def test_sighup_keeps_a_readable_partial_history(tmp_path):
     ds = xr.open_dataset(out / "history.nc")
     assert ds.attrs["status"] == "partial" and ds.sizes["time"] > 1
     assert "Traceback" not in err
+    assert not (out / ".emfabric.lock").exists()  # the folder is free again
 
 
 def test_a_signal_whose_exception_python_dropped_still_stops_the_run(tmp_path):
@@ -259,3 +260,110 @@ def test_max_stretch_counts_only_the_yarns_not_broken():
     alpha[touching] = 0.0
     fabric_diagnostics(*args)
     assert out[STRETCH] == 1.0
+
+
+# --- a write that fails during a run (issue 25 item 3) ---------------------------------------
+
+def _failing_scenario():
+    return load_scenario("demo-small", {"fabric.nodes": [11, 11], "solver.end_time": 2e-5,
+                                        "output.checkpoint_seconds": 1e-9,
+                                        "output.paraview": False})
+
+
+def _same_history(a, b):
+    import numpy as np
+
+    with xr.open_dataset(a / "history.nc") as x, xr.open_dataset(b / "history.nc") as y:
+        assert x.sizes == y.sizes
+        for v in y.variables:
+            np.testing.assert_array_equal(x[v].values, y[v].values, err_msg=v)
+
+
+@pytest.mark.parametrize("disk", ["checkpoint write fails", "disk full"])
+def test_failed_write_says_so_and_the_last_good_checkpoint_resumes(tmp_path, monkeypatch,
+                                                                   disk):
+    """ENOSPC at the second checkpoint: the run ends "failed" with the reason in history.nc
+    (not "partial", as if still going), the checkpoint in the folder is the first (the last
+    good one) and --resume continues from it to the numbers of a run that never stopped.
+    "disk full": from then on nothing can be written (history, snapshots, checkpoint): the
+    status is recorded in history.nc's header as it stands."""
+    import errno
+
+    import emfabric.runner.loop as runner
+    from emfabric.io.checkpoint import read_checkpoint
+    from emfabric.io.snapshots import Snapshots
+    from emfabric.runner.loop import resume
+
+    full = tmp_path / "full"
+    run(_failing_scenario(), full)
+    armed, calls = [], []
+
+    def enospc(path=None):
+        return OSError(errno.ENOSPC, "No space left on device", None if path is None
+                       else str(path))
+
+    real_checkpoint = runner.write_checkpoint
+
+    def checkpoint(path, *args):
+        calls.append(path)
+        if len(calls) >= 2:
+            armed.append(True)
+            raise enospc(path)
+        real_checkpoint(path, *args)
+
+    def when_armed(real):
+        def write(*args, **kwargs):
+            if armed:
+                raise enospc()
+            return real(*args, **kwargs)
+        return write
+
+    monkeypatch.setattr(runner, "write_checkpoint", checkpoint)
+    if disk == "disk full":
+        monkeypatch.setattr(runner, "append_history", when_armed(runner.append_history))
+        monkeypatch.setattr(runner, "write_history", when_armed(runner.write_history))
+        monkeypatch.setattr(Snapshots, "flush", when_armed(Snapshots.flush))
+    out = tmp_path / "x"
+    with pytest.raises(runner.OutputError, match=r"checkpoint\.nc: No space left on device") \
+            as info:
+        run(_failing_scenario(), out)
+    assert info.value.result.status == "failed"
+    with xr.open_dataset(out / "history.nc") as ds:
+        assert ds.attrs["status"] == "failed"
+        assert ds.attrs["end_reason"] == ("write error: cannot write checkpoint.nc: No space "
+                                          "left on device")
+    monkeypatch.undo()
+    assert read_checkpoint(out / "checkpoint.nc")[3].history_rows == 1  # the first one
+    assert not (out / ".emfabric.lock").exists()
+    assert resume(out).status == "complete"
+    _same_history(out, full)
+
+
+def test_status_in_place_never_grows_the_header(tmp_path):
+    """mark_status (the full-disk path) changes history.nc's header where it stands: a longer
+    reason is cut to the room of the one it replaces; the file's size and records stay."""
+    import numpy as np
+
+    from emfabric.io.history import mark_status, write_history
+    from emfabric.runner.loop import RUNNING
+
+    path = tmp_path / "history.nc"
+    write_history(xr.Dataset({"x": (("time",), np.arange(100.0))},
+                             coords={"time": np.arange(100.0)},
+                             attrs={"status": "partial", "end_reason": RUNNING}), path)
+    size = path.stat().st_size
+    assert mark_status(path, "failed", "write error: " + "x" * 500)
+    with xr.open_dataset(path) as ds:
+        assert ds.attrs["status"] == "failed" and ds.attrs["end_reason"].endswith("…")
+        assert len(ds.attrs["end_reason"].encode()) <= len(RUNNING.encode()) + 3
+        np.testing.assert_array_equal(ds["x"].values, np.arange(100.0))
+    assert path.stat().st_size == size
+    assert not mark_status(tmp_path / "none.nc", "failed", "x")
+
+
+def test_temporary_names_are_reported_as_the_file_they_stand_for():
+    from emfabric.runner.loop import target_of
+
+    assert str(target_of("/r/figures/.spin.ab_12cd3.partial.png")) == "/r/figures/spin.png"
+    assert str(target_of("/r/.history.a1b2c3d4.partial.nc")) == "/r/history.nc"
+    assert str(target_of("/r/spin.png")) == "/r/spin.png"

@@ -19,16 +19,30 @@ import sys
 # isort: off
 from emfabric.cli import run, field, plot, study, materials  # noqa: F401
 # isort: on
-from emfabric.cli.app import app, error
+from emfabric.cli.app import EXIT_FAILED, EXIT_INPUT, app, error
 from emfabric.config.scenario import ScenarioError
 
 
 def main() -> None:  # pragma: no cover - console entry
+    """The console entry: the commands' own exit statuses (docs/errors.md), and for an error
+    no command caught, one line instead of a traceback: 2 for an input error (a scenario, an
+    output folder in use), 1 for an operating-system error (a file that could not be
+    written). Interrupts exit 130 (typer)."""
+    from emfabric.io.lock import FolderInUse
+
     try:
         app()
-    except ScenarioError as err:
+    except (ScenarioError, FolderInUse) as err:
         error(str(err))
-        sys.exit(2)
+        sys.exit(EXIT_INPUT)
+    except OSError as err:
+        if err.filename:
+            from emfabric.runner.loop import target_of
+
+            error(f"{target_of(err.filename)}: {err.strerror or err}")
+        else:
+            error(str(err))
+        sys.exit(EXIT_FAILED)
 
 
 __all__ = ["app", "main"]

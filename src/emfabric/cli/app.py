@@ -1,19 +1,31 @@
 """The command-line application object and its output helpers, shared by the command modules
-(emfabric.cli: run, validate, scenarios; emfabric.cli.plot: plot, animate)."""
+(emfabric.cli: run, validate, scenarios; emfabric.cli.plot: plot, animate), and the exit
+statuses every command keeps (docs/errors.md): 0 done, 1 a runtime failure (a diverged or
+failed run, an error while writing, a study that found no answer), 2 an input error (a bad
+scenario, option or input file, an output folder in use), 130 interrupted."""
 
 from __future__ import annotations
 
+import contextlib
 import sys
+from collections.abc import Iterator
+from pathlib import Path
 from typing import Annotated
 
 import typer
 from rich.console import Console
 from rich.markup import escape
 
+EXIT_OK, EXIT_FAILED, EXIT_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
+"""The exit statuses (docs/errors.md)."""
+
 app = typer.Typer(
     add_completion=False,
     no_args_is_help=True,
     help="Simulate a rigid projectile striking electromagnetically sensitive fabric.",
+    epilog="Exit status: 0 done; 1 a runtime failure (diverged or failed run, write error, "
+           "failed study); 2 an input error (bad scenario, option or input file; output "
+           "folder in use); 130 interrupted. See docs/errors.md.",
 )
 console = Console(stderr=True)
 """Messages, progress and the summary table: stderr."""
@@ -72,4 +84,97 @@ def load_or_exit(scenario: str, overrides: list[str] | None):
         return load_scenario(scenario, pairs)
     except ScenarioError as err:
         error(str(err))
-        raise typer.Exit(2) from None
+        raise typer.Exit(EXIT_INPUT) from None
+    except OSError as err:  # a file that exists but cannot be read (permissions, I/O)
+        error(f"cannot read {err.filename or scenario}: {err.strerror or err}")
+        raise typer.Exit(EXIT_INPUT) from None
+
+
+def hold_folder(folder: Path) -> None:
+    """Hold the output folder for the rest of the command (emfabric.io.lock): exit 2 with the
+    holder named if another emfabric process holds it, exit 1 if it cannot be written. The
+    lock is released when the command ends, however it ends."""
+    from emfabric.io.lock import FolderInUse, acquire
+
+    try:
+        lock = acquire(folder)
+    except FolderInUse as err:
+        error(str(err))
+        raise typer.Exit(EXIT_INPUT) from None
+    except OSError as err:
+        error(f"cannot write {folder}: {err.strerror or err}")
+        raise typer.Exit(EXIT_FAILED) from None
+    ctx = _command_context()
+    if ctx is not None:
+        ctx.call_on_close(lock.release)
+    else:  # pragma: no cover - called outside a command
+        import atexit
+
+        atexit.register(lock.release)
+
+
+def _command_context():
+    """The running command's context, closed when the command ends however it ends (typer
+    vendors click since 0.2x as typer._click; older ones use click itself)."""
+    import importlib
+
+    for name in ("typer._click.globals", "click"):
+        try:
+            ctx = importlib.import_module(name).get_current_context(silent=True)
+        except (ImportError, AttributeError):
+            continue
+        if ctx is not None:
+            return ctx
+    return None
+
+
+def _within(path: Path, roots: tuple[Path, ...]) -> bool:
+    """Whether `path` is one of `roots`, inside one, or a folder above one."""
+    p = path.resolve()
+    for root in roots:
+        r = root.resolve()
+        if p == r or r in p.parents or p in r.parents:
+            return True
+    return False
+
+
+@contextlib.contextmanager
+def writing(*outputs: Path) -> Iterator[None]:
+    """Operating-system errors in the block as one line, never a traceback: writing one of
+    `outputs` (a file or folder, and anything in it) "cannot write X: why", exit 1; any other
+    file "cannot read X: why", exit 2; a missing input that emfabric describes itself (a
+    FileNotFoundError with a message only), exit 2."""
+    try:
+        yield
+    except OSError as err:
+        from emfabric.runner.loop import OutputError, target_of
+
+        if isinstance(err, OutputError):
+            error(str(err))
+            raise typer.Exit(EXIT_FAILED) from None
+        if err.errno is None and not err.filename:
+            error(str(err))
+            raise typer.Exit(EXIT_INPUT) from None
+        why = err.strerror or str(err)
+        name = target_of(err.filename) if err.filename else None
+        if name is None or _within(name, outputs):
+            error(f"cannot write {name or outputs[0]}: {why}")
+            raise typer.Exit(EXIT_FAILED) from None
+        error(f"cannot read {name}: {why}")
+        raise typer.Exit(EXIT_INPUT) from None
+
+
+def check_readable(*paths: Path) -> None:
+    """Exit 2 with one line if one of the netCDF files given (those that exist) cannot be
+    opened: an input the command would otherwise fail on with a library's traceback."""
+    import netCDF4
+
+    for path in paths:
+        if not path.is_file():
+            continue
+        try:
+            netCDF4.Dataset(path, "r").close()
+        except (OSError, RuntimeError, ValueError) as err:
+            why = getattr(err, "strerror", None) or str(err)
+            error(f"cannot read {path}: {why} (not a netCDF file emfabric wrote?)")
+            raise typer.Exit(EXIT_INPUT) from None

@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from emfabric.cli.app import app, emit, error, load_or_exit
+from emfabric.cli.app import EXIT_INPUT, app, emit, error, load_or_exit, writing
 from emfabric.config.scenario import ScenarioError
 
 _load = load_or_exit
@@ -35,6 +35,17 @@ def _points(args: list[str]) -> list[tuple[float, float, float]]:
     return points
 
 
+def _check_format(path: Path) -> None:
+    """Exit 2 unless matplotlib writes the file's format (its suffix)."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    kinds = FigureCanvasBase.get_supported_filetypes()
+    if path.suffix.lstrip(".").lower() not in kinds:
+        error(f"--plot {path}: allowed: a file ending in "
+              f"{', '.join('.' + k for k in sorted(kinds))}")
+        raise typer.Exit(EXIT_INPUT)
+
+
 @app.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
 def field(
     ctx: typer.Context,
@@ -55,13 +66,15 @@ def field(
         at = _points(list(ctx.args))
     except ValueError as err:
         error(str(err))
-        raise typer.Exit(2) from None
+        raise typer.Exit(EXIT_INPUT) from None
     if not at and plot is None:
         error("give at least one point: --at X Y Z (or --plot FILE)")
-        raise typer.Exit(2)
+        raise typer.Exit(EXIT_INPUT)
     if not math.isfinite(at_time):
         error(f"--time {at_time}: allowed: a finite time [s]")
-        raise typer.Exit(2)
+        raise typer.Exit(EXIT_INPUT)
+    if plot is not None:
+        _check_format(plot)
     from emfabric.sources.build import build_field
     from emfabric.sources.evaluate import fields_at
 
@@ -69,7 +82,7 @@ def field(
         fld = build_field(sc)
     except ScenarioError as err:
         error(str(err))
-        raise typer.Exit(2) from None
+        raise typer.Exit(EXIT_INPUT) from None
     if plot is not None:
         from emfabric.sim.geometry import initial_pose
         from emfabric.sources.picture import field_picture
@@ -78,7 +91,9 @@ def field(
         # the projectile's start and flight direction, as the run would have them
         pose = initial_pose(sc.projectile)
         pic = field_picture(sc, fld, at_time, pose.position, pose.flight_direction)
-        emit(str(draw(pic, plot)))
+        with writing(plot):
+            drawn = draw(pic, plot)
+        emit(str(drawn))
     if not at:
         return
     e, b = fields_at(fld, at, at_time)

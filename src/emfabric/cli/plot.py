@@ -1,4 +1,7 @@
-"""`emfabric plot` and `emfabric animate`: figures and movies from a run's files."""
+"""`emfabric plot` and `emfabric animate`: figures and movies from a run's files.
+
+Exit statuses (docs/errors.md): a missing or unreadable run folder 2, a figure or movie that
+cannot be written (a read-only folder, a full disk) 1, with one line naming the file."""
 
 from __future__ import annotations
 
@@ -7,12 +10,15 @@ from typing import Annotated
 
 import typer
 
-from emfabric.cli.app import app, emit, error, show_messages
-
-
-def _missing(err: FileNotFoundError) -> typer.Exit:
-    error(str(err))
-    return typer.Exit(2)
+from emfabric.cli.app import (
+    EXIT_INPUT,
+    app,
+    check_readable,
+    emit,
+    error,
+    show_messages,
+    writing,
+)
 
 
 @app.command()
@@ -26,16 +32,17 @@ def plot(
     from emfabric.viz.plots import plot_runs
 
     show_messages()
-    try:
-        if len(runs) == 1 and (runs[0] / "results.nc").is_file() and \
-                not (runs[0] / "history.nc").is_file():
+    study = len(runs) == 1 and (runs[0] / "results.nc").is_file() and \
+        not (runs[0] / "history.nc").is_file()
+    check_readable(*(r / name for r in runs for name in ("history.nc", "snapshots.nc",
+                                                         "results.nc")))
+    with writing(out if out is not None else runs[0] / "figures"):
+        if study:
             from emfabric.viz.study_plots import study_figures
 
             files = study_figures(runs[0], out)
         else:
             files = plot_runs(runs, out)
-    except FileNotFoundError as err:
-        raise _missing(err) from None
     for f in files:
         emit(str(f))
 
@@ -55,15 +62,15 @@ def animate(
     show_messages()
     if not (mp4 or gif):
         error("nothing to write: --no-mp4 without --gif")
-        raise typer.Exit(2)
+        raise typer.Exit(EXIT_INPUT)
+    check_readable(run_dir / "history.nc", run_dir / "snapshots.nc")
     try:
-        files = make(run_dir, gif=gif, fps=fps, mp4=mp4)
-    except FileNotFoundError as err:
-        raise _missing(err) from None
+        with writing(run_dir / "figures"):
+            files = make(run_dir, gif=gif, fps=fps, mp4=mp4)
     except RuntimeError as err:
         if str(err) != MP4_MISSING:
             raise
         error(MP4_MISSING)
-        raise typer.Exit(2) from None
+        raise typer.Exit(EXIT_INPUT) from None
     for f in files:
         emit(str(f))

@@ -15,13 +15,18 @@ from rich.table import Table
 from rich.text import Text
 
 from emfabric.cli.app import (
+    EXIT_FAILED,
+    EXIT_INPUT,
+    EXIT_INTERRUPTED,
     app,
     console,
     emit,
     error,
+    hold_folder,
     load_or_exit,
     out_console,
     show_messages,
+    writing,
 )
 from emfabric.config.scenario import (
     ScenarioError,
@@ -58,6 +63,8 @@ def run(
 ) -> None:
     """Run a scenario; write history.nc, snapshots, ParaView files and a checkpoint into the output folder as the run goes (--resume DIR continues a stopped run)."""  # noqa: E501
     from emfabric.io.checkpoint import CHECKPOINT, CheckpointError, read_checkpoint
+    from emfabric.io.lock import FolderInUse
+    from emfabric.runner.loop import OutputError
     from emfabric.runner.loop import resume as resume_run
     from emfabric.runner.loop import run as run_scenario
 
@@ -65,12 +72,14 @@ def run(
         if out is not None and out.resolve() != resume.resolve():
             error(f"--out {out} and --resume {resume} name different folders; a resumed run "
                   f"writes into the folder it resumes")
-            raise typer.Exit(2)
+            raise typer.Exit(EXIT_INPUT)
+        if resume.is_dir():
+            hold_folder(resume)  # one run at a time in a folder: exit 2 naming the holder
         try:
             sc = read_checkpoint(resume / CHECKPOINT)[0]
         except CheckpointError as err:
             error(str(err))
-            raise typer.Exit(2) from None
+            raise typer.Exit(EXIT_INPUT) from None
         given = None
         if scenario is not None:
             given = _load(scenario, set_)
@@ -79,7 +88,7 @@ def run(
                 given = apply_overrides(sc, dict(parse_override(o) for o in set_))
             except ScenarioError as err:
                 error(str(err))
-                raise typer.Exit(2) from None
+                raise typer.Exit(EXIT_INPUT) from None
         out_dir = resume
 
         def start(progress_fn):
@@ -92,13 +101,14 @@ def run(
             out_dir = Path("runs") / Path(scenario).stem  # a copied file keeps its own folder
         else:
             out_dir = Path("runs") / sc.name
+        hold_folder(out_dir)  # one run at a time in a folder: exit 2 naming the holder
         from emfabric.io.outputs import clear_run, run_in
 
         held = run_in(out_dir)
         if held is not None and not force:
             error(f"{out_dir} holds another run ({held}); use --force to replace it, "
                   f"--resume {out_dir} to continue it, or --out to write elsewhere")
-            raise typer.Exit(2)
+            raise typer.Exit(EXIT_INPUT)
         if held is not None:
             clear_run(out_dir)
 
@@ -143,27 +153,39 @@ def run(
                        rate=result.state.t * 1e6 / elapsed * 60.0)
         except KeyboardInterrupt as exc:
             result = getattr(exc, "result", None)
+            if result is None:
+                bar.stop()
+                console.print("[yellow]interrupted[/] before the run started",
+                              highlight=False)
+                raise typer.Exit(EXIT_INTERRUPTED) from None
             console.print("[yellow]interrupted[/]: the history written so far is marked partial;"
                           f" continue with `emfabric run --resume {escape(str(out_dir))}`",
-                          markup=True, highlight=False)
-        except (CheckpointError, ScenarioError) as exc:
+                          markup=True, highlight=False, soft_wrap=True)
+        except (CheckpointError, ScenarioError, FolderInUse) as exc:
             bar.stop()
             error(str(exc))
-            raise typer.Exit(2) from None
+            raise typer.Exit(EXIT_INPUT) from None
+        except OutputError as exc:  # a write failed (full disk, permissions): status failed
+            result = getattr(exc, "result", None)
+            bar.stop()
+            hint = (f"; once it can be written, `emfabric run --resume {out_dir}` continues "
+                    f"from the last checkpoint" if (out_dir / CHECKPOINT).is_file() else "")
+            error(f"{exc}{hint}")
         except Exception as exc:  # DivergenceError and friends
             result = getattr(exc, "result", None)
             error(str(exc))
     if result is None:
-        raise typer.Exit(1)
+        raise typer.Exit(EXIT_FAILED)
     _print_summary(result, json_summary)
     if plot:
         from emfabric.viz.plots import plot_runs
 
-        files = plot_runs([out_dir])
+        with writing(out_dir / "figures"):
+            files = plot_runs([out_dir])
         for f in files:
             emit(str(f))
     if result.status != "complete":
-        raise typer.Exit(130 if result.status == "partial" else 1)
+        raise typer.Exit(EXIT_INTERRUPTED if result.status == "partial" else EXIT_FAILED)
 
 
 def _print_summary(result, as_json: bool) -> None:
@@ -213,7 +235,7 @@ def validate(
         model = build_model(sc)
     except ScenarioError as err:
         error(str(err))
-        raise typer.Exit(2) from None
+        raise typer.Exit(EXIT_INPUT) from None
     grids = [model.ply_grid(p) for p in range(model.ply_count)]
     pack = (f"{grids[0][0]} x {grids[0][1]} nodes" if len(grids) == 1 else
             f"{len(grids)} plies, {model.node_count} nodes")

@@ -1,4 +1,11 @@
-"""Command line of the studies: ``emfabric sweep``."""
+"""Command line of the studies: ``emfabric sweep``, ``estimate``, ``design-field``,
+``ballistic-limit``.
+
+Exit statuses (docs/errors.md): 2 for what is wrong before a case runs (the study file, an
+option, the scenario, the folder in use); 1 for a study that ran and found no answer (no
+bracket, the runs stopped completing) and for a file that cannot be written; 130 for an
+interrupt, with one line saying what is kept and how to go on. A sweep whose cases diverged or
+failed exits 0: those cases are results (results.nc, `status` and `message`)."""
 
 from __future__ import annotations
 
@@ -11,7 +18,18 @@ from typing import Annotated
 import typer
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from emfabric.cli.app import app, console, emit, error, load_or_exit
+from emfabric.cli.app import (
+    EXIT_FAILED,
+    EXIT_INPUT,
+    EXIT_INTERRUPTED,
+    app,
+    console,
+    emit,
+    error,
+    hold_folder,
+    load_or_exit,
+    writing,
+)
 
 WorkersOpt = Annotated[int | None, typer.Option(
     "--workers", help="Local Dask cluster of N worker processes (default: one per two cores)")]
@@ -21,6 +39,25 @@ SchedulerOpt = Annotated[str | None, typer.Option(
 ThreadsOpt = Annotated[int | None, typer.Option(
     "--threads", help="Numba threads per case (default: cores / workers locally, 1 on a "
                       "scheduler)")]
+VerboseOpt = Annotated[bool, typer.Option(
+    "--verbose", "-v", help="Show Dask's own log messages and warnings (also: "
+                            "EMFABRIC_DASK_VERBOSE=1)")]
+
+
+def _verbose(on: bool) -> None:
+    if on:
+        import os
+
+        os.environ["EMFABRIC_DASK_VERBOSE"] = "1"  # read by emfabric.studies.sweep.connect
+
+
+def _interrupted(out: Path, what: str) -> typer.Exit:
+    """The one line an interrupted study prints (what is kept, how to go on); exit 130."""
+    kept = len(list((out / "cases").glob("*.json"))) if (out / "cases").is_dir() else 0
+    console.print(f"[yellow]interrupted[/]: {what}; {kept} finished runs are kept in "
+                  f"{out / 'cases'}: run the same command again to reuse them and do the rest",
+                  highlight=False, soft_wrap=True)
+    return typer.Exit(EXIT_INTERRUPTED)
 
 
 def _stop_on_signals() -> None:
@@ -53,6 +90,7 @@ def sweep(
     json_summary: Annotated[bool, typer.Option("--json", help="Print the summary as JSON on "
                                                               "stdout")] = False,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No progress bar")] = False,
+    verbose: VerboseOpt = False,
 ) -> None:
     """Run every case of a study on Dask (reusing the cases already in the folder) and write
     DIR/results.nc."""
@@ -63,7 +101,12 @@ def sweep(
         plan = load_study(study)
     except StudyError as err:
         error(str(err))
-        raise typer.Exit(2) from None
+        raise typer.Exit(EXIT_INPUT) from None
+    except OSError as err:
+        error(f"cannot read {study}: {err.strerror or err}")
+        raise typer.Exit(EXIT_INPUT) from None
+    _verbose(verbose)
+    hold_folder(out)  # one study at a time in a folder: exit 2 naming the holder
     _stop_on_signals()
     bar = _progress(quiet)
     t0 = time.perf_counter()
@@ -76,17 +119,20 @@ def sweep(
             bar.update(task, completed=reused + done, rate=done / minutes)
 
         try:
-            outcome = run_sweep(plan, out, workers=workers, scheduler=scheduler,
-                                threads=threads, progress=progress)
-        except StudyError as err:
+            with writing(out):
+                outcome = run_sweep(plan, out, workers=workers, scheduler=scheduler,
+                                    threads=threads, progress=progress)
+        except StudyError as err:  # the options (workers, scheduler): before any case ran
             bar.stop()
             error(str(err))
-            raise typer.Exit(2) from None
+            raise typer.Exit(EXIT_INPUT) from None
         except KeyboardInterrupt:
             bar.stop()
-            console.print("[yellow]interrupted[/]: the finished cases are kept in "
-                          f"{out / 'cases'}; run the same command again to do the rest")
-            raise typer.Exit(130) from None
+            done = sum(read_case(out, c) is not None for c in plan.cases)
+            console.print(f"[yellow]interrupted[/]: {done} of {len(plan.cases)} cases finished "
+                          f"and kept in {out / 'cases'}; run the same command again to do the "
+                          f"rest", highlight=False, soft_wrap=True)
+            raise typer.Exit(EXIT_INTERRUPTED) from None
         bar.update(task, completed=len(plan.cases))
     summary = outcome.summary()
     if json_summary:
@@ -120,7 +166,7 @@ def estimate(
         est = eq54(sc, target_tilt, by)
     except ValueError as err:
         error(str(err))
-        raise typer.Exit(2) from None
+        raise typer.Exit(EXIT_INPUT) from None
     emit(json.dumps(est.as_dict()))
 
 
@@ -139,6 +185,7 @@ def design_field(
     set_: SetOpt = None,
     json_summary: Annotated[bool, typer.Option("--json", help="Print the result as JSON on "
                                                               "stdout")] = False,
+    verbose: VerboseOpt = False,
 ) -> None:
     """The smallest scale of the scenario's field whose run reaches the target tilt by the
     given time, found by a bracketed search over runs on Dask (eq 5.4 beside it)."""
@@ -147,21 +194,30 @@ def design_field(
     from emfabric.studies.sweep import StudyError
 
     sc = load_or_exit(scenario, set_)
-    _stop_on_signals()
     if not 0.0 < tolerance < 1.0:
         error(f"--tolerance {tolerance}: allowed: between 0 and 1")
-        raise typer.Exit(2)
+        raise typer.Exit(EXIT_INPUT)
+    _verbose(verbose)
+    hold_folder(out)  # one study at a time in a folder: exit 2 naming the holder
+    _stop_on_signals()
+    # the search reports each round of runs: an error after one is the study's failure (1),
+    # before any, an input error (2)
+    rounds: list[int] = []
     try:
-        res = search(sc, target_tilt, by, out, workers=workers, scheduler=scheduler,
-                     threads=threads, rel_tol=tolerance)
+        with writing(out):
+            res = search(sc, target_tilt, by, out, workers=workers, scheduler=scheduler,
+                         threads=threads, rel_tol=tolerance, progress=rounds.append)
+    except KeyboardInterrupt:
+        raise _interrupted(out, "no field found yet") from None
     except (StudyError, ValueError) as err:
         error(str(err))
-        raise typer.Exit(2) from None
+        raise typer.Exit(EXIT_FAILED if rounds else EXIT_INPUT) from None
     text = json.dumps(res, indent=1)
-    write_atomic(out / "design.json", lambda tmp: tmp.write_text(text, encoding="utf-8"))
     from emfabric.viz.study_plots import design_figure
 
-    fig = design_figure(res, out / "design.png")
+    with writing(out):
+        write_atomic(out / "design.json", lambda tmp: tmp.write_text(text, encoding="utf-8"))
+        fig = design_figure(res, out / "design.png")
     if json_summary:
         emit(json.dumps({k: res[k] for k in ("scale", "B_centre", "estimate_eq54",
                                               "target_tilt", "by", "runs")}))
@@ -187,6 +243,7 @@ def ballistic_limit(
     set_: SetOpt = None,
     json_summary: Annotated[bool, typer.Option("--json", help="Print the result as JSON on "
                                                               "stdout")] = False,
+    verbose: VerboseOpt = False,
 ) -> None:
     """V_BL of the model by bracketing and bisecting the striking speed, the Lambert-Jonas fit
     of the residual speeds above it, and with --seeds, V50 and its spread (runs on Dask)."""
@@ -195,21 +252,32 @@ def ballistic_limit(
     from emfabric.studies.sweep import StudyError
 
     sc = load_or_exit(scenario, set_)
-    _stop_on_signals()
     if seeds < 0:
         error(f"--seeds {seeds}: allowed: 0 or more")
-        raise typer.Exit(2)
+        raise typer.Exit(EXIT_INPUT)
+    _verbose(verbose)
+    hold_folder(out)  # one study at a time in a folder: exit 2 naming the holder
+    _stop_on_signals()
+    # the search reports each round of shots: an error after one is the study's failure (1),
+    # before any, an input error (2)
+    rounds: list[int] = []
     try:
-        res = search(sc, out, seeds=seeds, tolerance=tolerance, workers=workers,
-                     scheduler=scheduler, threads=threads)
+        with writing(out):
+            res = search(sc, out, seeds=seeds, tolerance=tolerance, workers=workers,
+                         scheduler=scheduler, threads=threads, progress=rounds.append)
+    except KeyboardInterrupt:
+        raise _interrupted(out, "no ballistic limit yet") from None
     except ImportError as err:
         error(f"the ballistic limit needs the studies extra: pip install 'emfabric[studies]' "
               f"({err})")
-        raise typer.Exit(2) from None
+        raise typer.Exit(EXIT_INPUT) from None
+    except typer.Exit:
+        raise
     except (StudyError, ValueError, RuntimeError) as err:
         error(str(err))
-        raise typer.Exit(2) from None
-    files = write_outputs(res, out)
+        raise typer.Exit(EXIT_FAILED if rounds else EXIT_INPUT) from None
+    with writing(out):
+        files = write_outputs(res, out)
     if json_summary:
         keep = ("v_bl", "v_bl_bracket", "lambert_jonas", "v50", "runs")
         emit(json.dumps({k: res[k] for k in keep if k in res}))

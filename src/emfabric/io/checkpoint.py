@@ -1,7 +1,10 @@
 """A checkpoint is a State: ``checkpoint.nc`` holds every field of the State (arrays and scalars,
 float64 exactly), where the run's outputs stood (history records and snapshots written, the next
 snapshot time, wall time so far), the package version and the full scenario text. netCDF, no
-pickle: reading it executes nothing. Written atomically (a kill leaves the previous checkpoint).
+pickle: reading it executes nothing. Written atomically (a kill leaves the previous checkpoint)
+and read back before it replaces the previous one: a write that failed without saying so (a
+full disk can leave a broken HDF5 file behind a successful close) never replaces the last good
+checkpoint.
 
 Nothing random is drawn while a run steps (the yarn moduli are drawn from ``material.seed`` when
 the model is built), so there is no RNG state to keep: the model is rebuilt from the scenario.
@@ -17,7 +20,7 @@ import numpy as np
 import xarray as xr
 
 from emfabric.config.scenario import Scenario, ScenarioError, scenario_from_dict
-from emfabric.io.netcdf import write_netcdf
+from emfabric.io.atomic import write_atomic
 from emfabric.sim.model import Model
 from emfabric.sim.state import State
 
@@ -67,7 +70,16 @@ def write_checkpoint(path: Path, model: Model, state: State, pos: RunPosition) -
         "checkpoint_format": FORMAT,
         "scenario": model.scenario.to_toml(),
     })
-    write_netcdf(ds, path)
+
+    def write_and_check(tmp: Path) -> None:
+        import netCDF4
+
+        ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4")
+        with netCDF4.Dataset(tmp, "r") as nc:  # every variable reads back
+            for var in nc.variables.values():
+                var[...]
+
+    write_atomic(path, write_and_check)
 
 
 def read_checkpoint(path: Path) -> tuple[Scenario, str, State, RunPosition]:

@@ -147,6 +147,46 @@ def history_status(path: Path) -> tuple[str, str, str] | None:
         return None
 
 
+_KEPT: list = []
+"""netCDF4 Datasets whose close failed, never collected (netCDF4 would close them again)."""
+
+
+def mark_status(path: Path, status: str, end_reason: str) -> bool:
+    """Set history.nc's `status` and `end_reason` in place, without writing anything else: the
+    way to record a run's end when the disk is full (a rewrite of the file needs room). The
+    file's header never grows (it would move the records): `end_reason` is cut to the room
+    of the one it replaces (a running run's is long enough for a write error, see
+    emfabric.runner.loop.RUNNING). Returns whether it was done."""
+    import netCDF4
+
+    def room(text) -> int:  # bytes of header a text attribute takes (padded to 4)
+        return -(-len(str(text).encode("utf-8")) // 4) * 4
+
+    try:
+        nc = netCDF4.Dataset(path, "a")
+    except (OSError, RuntimeError):
+        return False
+    done = False
+    try:
+        budget = room(nc.getncattr("end_reason"))
+        if room(status) <= room(nc.getncattr("status")):
+            reason = end_reason.encode("utf-8")
+            if len(reason) > budget:
+                reason = reason[:max(0, budget - 3)].decode("utf-8", "ignore").encode() + \
+                    "…".encode()
+            nc.setncattr("status", status)
+            nc.setncattr("end_reason", reason.decode("utf-8"))
+            done = True
+    except (OSError, RuntimeError, AttributeError, KeyError):
+        done = False
+    try:
+        nc.close()
+    except (OSError, RuntimeError):
+        _KEPT.append(nc)
+        return False
+    return done
+
+
 def fabric_reference(scenario) -> str:
     """Which fabric the grid runs as (fabric.rescale and reference_nodes), in words."""
     fab = scenario.fabric

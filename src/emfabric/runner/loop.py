@@ -29,10 +29,12 @@ from emfabric.io.history import (
     Recorder,
     append_history,
     history_status,
+    mark_status,
     read_history_rows,
     run_attributes,
     write_history,
 )
+from emfabric.io.lock import folder_lock
 from emfabric.io.snapshots import Snapshots, snapshot_times, truncate_snapshots
 from emfabric.runner.summary import summarize
 from emfabric.sim.builder import build_model
@@ -43,6 +45,12 @@ from emfabric.sim.state import State, initial_state
 
 ProgressFn = Callable[[State, StepInfo], None]
 log = logging.getLogger(__name__)
+
+RUNNING = ("running; if it is not (killed), `emfabric run --resume` on this folder continues "
+           "it from its last checkpoint")
+"""history.nc's end_reason while the run goes (status "partial"). Long enough on purpose: a
+write error on a full disk is recorded in its place, in the file's header as it stands
+(emfabric.io.history.mark_status)."""
 
 # Set by `interrupt` (the command line's SIGINT/SIGTERM/SIGHUP handler). The handler also raises
 # KeyboardInterrupt at once, but Python drops an exception raised while it runs a weakref
@@ -97,17 +105,28 @@ def run(
     """
     model = scenario if isinstance(scenario, Model) else build_model(scenario)
     log_warnings(model, log)  # is the charge physical? (emfabric.sim.plausibility)
-    out = Path(out_dir) if out_dir is not None else None
-    if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
-    return _loop(model, None, None, out, progress, end_time, threads)
+    if out_dir is None:
+        return _loop(model, None, None, None, progress, end_time, threads)
+    out = Path(out_dir)
+    # one run at a time per folder (emfabric.io.lock): FolderInUse before anything is written
+    with folder_lock(out):
+        return _loop(model, None, None, out, progress, end_time, threads)
 
 
 def resume(out_dir: str | Path, scenario: Scenario | None = None, *,
            progress: ProgressFn | None = None, threads: int | None = None) -> RunResult:
     """Continue the run whose checkpoint is in out_dir. The history it writes is bitwise the one
-    an uninterrupted run writes. A scenario, if given, must equal the checkpoint's."""
+    an uninterrupted run writes. A scenario, if given, must equal the checkpoint's. The folder
+    is held while the run goes (emfabric.io.lock: FolderInUse if another process holds it)."""
     out = Path(out_dir)
+    if not out.is_dir():
+        read_checkpoint(out / CHECKPOINT)  # raises: no checkpoint, nothing to resume
+    with folder_lock(out):
+        return _resume(out, scenario, progress, threads)
+
+
+def _resume(out: Path, scenario: Scenario | None, progress: ProgressFn | None,
+            threads: int | None) -> RunResult:
     path = out / CHECKPOINT
     stored, version, state, pos = read_checkpoint(path)
     check_matches(scenario if scenario is not None else stored, version, stored, path)
@@ -146,13 +165,15 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
         if out is not None:
             # a readable (empty) history before anything compiles: killed at any moment, the
             # folder says what was run and that it did not finish
-            write_history(Recorder(plies=model.ply_count).to_dataset(
-                run_attributes(model, "partial", "starting", 0.0)), out / "history.nc")
+            with _naming(out / "history.nc"):
+                write_history(Recorder(plies=model.ply_count).to_dataset(
+                    run_attributes(model, "partial", RUNNING, 0.0)), out / "history.nc")
         s_in = initial_state(model)
         recorder = Recorder(plies=model.ply_count)
         snaps = Snapshots(model, out, paraview=_paraview(model))
         measure(model, s_in, recorder.new_row())
-        snaps.take(s_in)
+        with _snapshot_naming(out):
+            snaps.take(s_in)
         next_snap = interval
         wall_before = 0.0
         written = 0
@@ -163,9 +184,11 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
         next_snap = pos.next_snapshot
         wall_before = pos.wall_time
         # records and snapshots written after the checkpoint are written again
-        write_history(recorder.to_dataset(run_attributes(model, "partial", "resumed",
-                                                         wall_before)), out / "history.nc")
-        truncate_snapshots(out / "snapshots.nc", pos.snapshots)
+        with _naming(out / "history.nc"):
+            write_history(recorder.to_dataset(run_attributes(model, "partial", RUNNING,
+                                                             wall_before)), out / "history.nc")
+        with _naming(out / "snapshots.nc"):
+            truncate_snapshots(out / "snapshots.nc", pos.snapshots)
         written = recorder.count
         log.info("resuming at t = %.6g s (step %d)", s_in.t, s_in.steps)
     s_out = s_in.copy()
@@ -206,7 +229,7 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
         if resumed is None:
             # the initial record on disk before the step kernel compiles (seconds on a cold
             # cache): a run killed meanwhile still leaves a readable history
-            save("partial", "running (checkpoint)")
+            save("partial", RUNNING)
         while s_in.t < t_end * (1 - 1e-12):
             if _STOP.is_set():
                 raise KeyboardInterrupt
@@ -225,7 +248,8 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
                 if deferred:
                     integ.start_background_compile(s_in, s_out)
             if s_in.t >= next_snap * (1 - 1e-12):
-                snaps.take(s_in)
+                with _snapshot_naming(out):  # the .vtu files are written as it is taken
+                    snaps.take(s_in)
                 next_snap = interval * (math.floor(s_in.t / interval + 1e-9) + 1)
             if progress is not None:
                 progress(s_in, info)
@@ -234,20 +258,25 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
                 reason = left
                 break
             if out is not None and time.perf_counter() > next_checkpoint:
-                save("partial", "running (checkpoint)")
+                save("partial", RUNNING)
                 next_checkpoint = time.perf_counter() + options.checkpoint_seconds
     except KeyboardInterrupt as exc:
         status, reason, error = "partial", f"interrupted at t = {s_in.t:.6g} s", exc
     except DivergenceError as exc:
         status, reason, error = "diverged", str(exc), exc
     except OutputError as exc:
-        status, reason, error = "failed", str(exc), exc
+        status, reason, error = "failed", exc.reason, exc
     _STOP.clear()  # handled: a later run in this process starts afresh
     # the last state as a snapshot too (the figures of a partial run end there); a resumed run
     # drops it: the checkpoint counts only the snapshots of the regular interval
     regular = snaps.count
     if snaps.times[-1] != s_in.t:
-        snaps.take(s_in)
+        try:
+            with _snapshot_naming(out):
+                snaps.take(s_in)
+        except OutputError as exc:
+            if error is None:
+                status, reason, error = "failed", exc.reason, exc
     total = wall()
     attrs = run_attributes(model, status, reason, total)
     ds = recorder.to_dataset(attrs)
@@ -257,9 +286,18 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
         try:
             save(status, reason, ds, regular)
         except OutputError as exc:
-            log.error("%s; the files written before are kept", exc)
+            log.error("%s; the files written before are kept%s", exc,
+                      "" if model.scenario is None else
+                      " (the last checkpoint resumes: `emfabric run --resume`)")
             if error is None:
-                status, reason, error = "failed", str(exc), exc
+                status, reason, error = "failed", exc.reason, exc
+            ds.attrs.update(status=status, end_reason=reason)
+            # the full rewrite failed (a full disk?): the status in history.nc's header as it
+            # stands, so that the folder does not claim a run still going
+            if out is not None and (out / "history.nc").is_file() and \
+                    not mark_status(out / "history.nc", status, reason):
+                log.error("%s still reads status = partial: its end could not be recorded",
+                          out / "history.nc")
     result = RunResult(model, s_in, ds, status, reason, total, out)
     result.summary = summarize(result)
     if integ.compiling_in_background and status != "partial":
@@ -274,17 +312,93 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
 class OutputError(OSError):
     """An output file could not be written (full disk, permissions): names the file."""
 
+    def __init__(self, path: Path | str, why: str) -> None:
+        super().__init__(f"cannot write {path}: {why}")
+        self.path = Path(path)
+        self.why = why
+
+    def __reduce__(self):
+        return (type(self), (str(self.path), self.why))
+
+    @property
+    def reason(self) -> str:
+        """The run's end reason: short enough for history.nc's header in place (RUNNING)."""
+        return f"write error: cannot write {self.path.name}: {self.why}"
+
+
+def target_of(name: str | Path) -> Path:
+    """The file a temporary name of emfabric.io.atomic stands for (".x.ab12cd34.partial.nc"
+    -> "x.nc"), or the name itself."""
+    import re
+
+    path = Path(name)
+    m = re.fullmatch(r"\.(.+)\.[A-Za-z0-9_]{8}\.partial(\.[^.]*)?", path.name)
+    return path.with_name(m[1] + (m[2] or "")) if m else path
+
 
 @contextlib.contextmanager
-def _naming(path: Path):
-    """Turn an OS error while writing `path` into an OutputError that names it."""
+def _naming(path: Path | None, *, exact: bool = True):
+    """Turn an OS error (or netCDF's "NetCDF: HDF error", which a full disk gives) while
+    writing `path` into an OutputError that names it; exact=False: `path` is the folder being
+    written, the error's own file name is named where it has one."""
     try:
         yield
+    except OutputError:
+        raise
     except OSError as err:
-        if isinstance(err, OutputError):
+        _keep_unclosed(err)
+        where = path if exact or not err.filename else target_of(err.filename)
+        raise OutputError(where if where is not None else "?", err.strerror or str(err)) \
+            from err
+    except RuntimeError as err:
+        if path is None or not _keep_unclosed(err):
             raise
-        why = err.strerror or str(err)
-        raise OutputError(f"cannot write {path}: {why}") from err
+        note = _free_space(path) if "NetCDF" in str(err) else ""  # "NetCDF: HDF error"
+        raise OutputError(path, f"{err}{note}") from err
+
+
+_UNCLOSED: list = []
+"""netCDF4 Datasets whose close failed (a full disk), kept for the life of the process:
+netCDF4 would close them again when they are collected, by then perhaps another file's
+handle (a crash, seen on a full disk, before the run's status was recorded)."""
+
+
+def _keep_unclosed(err: BaseException) -> bool:
+    """Keep the netCDF4 Datasets that the frames of `err` (and the errors it arose from)
+    hold; return whether netCDF4 raised it (its "NetCDF: …" errors and the OS errors it
+    passes on as RuntimeError)."""
+    from_netcdf = False
+    seen: set[int] = set()
+    while err is not None and id(err) not in seen:
+        seen.add(id(err))
+        tb = err.__traceback__
+        while tb is not None:
+            frame = tb.tb_frame
+            from_netcdf |= "netCDF4" in frame.f_code.co_filename
+            for value in list(frame.f_locals.values()):
+                kind = type(value)
+                if kind.__name__ == "Dataset" and kind.__module__.startswith("netCDF4") \
+                        and not any(value is k for k in _UNCLOSED):
+                    _UNCLOSED.append(value)
+            tb = tb.tb_next
+        err = err.__context__
+    return from_netcdf
+
+
+def _snapshot_naming(out: Path | None):
+    """_naming for Snapshots.take, which writes the snapshot's .vtu files into out/vtk."""
+    return _naming(out / "vtk" if out is not None else None, exact=False)
+
+
+def _free_space(path: Path) -> str:
+    """" (N bytes free on its disk)" where the disk of `path` is (nearly) full, else ""."""
+    import shutil
+
+    try:
+        free = shutil.disk_usage(path.parent).free
+    except OSError:
+        return ""
+    return f" ({free} bytes free on its disk)" if free < 1 << 24 else ""
 
 
 @contextlib.contextmanager

@@ -23,17 +23,28 @@ atomically when it arrives, so a rerun of the study reuses every finished case (
 failed case is finished too: it is recorded with its message) and runs only the rest; a case
 whose worker died is retried by Dask (and if the whole study was killed, simply run on the next
 invocation). The worker receives the scenario's TOML text, never a pickled model.
+
+The study folder is held by the study while it runs (emfabric.io.lock; a case kept with
+``keep_histories`` holds its own ``runs/<key>/`` while it runs). Dask's own log messages and
+warnings (a busy dashboard port, a worker restarted) stay out of the terminal unless
+``EMFABRIC_DASK_VERBOSE=1`` (the study commands' ``--verbose``); the local workers ignore
+Ctrl-C (the study stops them: no worker tracebacks).
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import itertools
 import json
+import logging
 import math
 import os
+import signal
+import threading
 import time
 import tomllib
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -201,6 +212,11 @@ def run_case(text: str, out: str | None, threads: int) -> dict[str, Any]:
     t0 = time.perf_counter()
     sc = scenario_from_dict(tomllib.loads(text), "<study case>")
     message = ""
+    if out is not None:
+        from emfabric.io.lock import drop_foreign
+
+        # a case Dask runs again after its worker on another host was lost: its lock is void
+        drop_foreign(out)
     try:
         result = run(sc, out)
     except (DivergenceError, OSError, RuntimeError, ValueError, ArithmeticError) as exc:
@@ -281,16 +297,61 @@ def _store(out: Path, case: Case, metrics: dict[str, Any]) -> None:
     write_atomic(_case_file(out, case), lambda tmp: tmp.write_text(text, encoding="utf-8"))
 
 
+DASK_VERBOSE = "EMFABRIC_DASK_VERBOSE"
+"""Environment variable: "1" lets Dask's own log messages and warnings through."""
+
+
+def dask_verbose() -> bool:
+    return os.environ.get(DASK_VERBOSE, "").strip().lower() in ("1", "true", "yes", "on")
+
+
+def _quiet_dask() -> None:
+    """Dask's log messages below ERROR and its warnings out of the terminal (unless
+    dask_verbose()): they speak of ports, heartbeats and restarts, not of the study."""
+    if dask_verbose():
+        return
+    logging.getLogger("distributed").setLevel(logging.ERROR)
+    warnings.filterwarnings("ignore", module=r"distributed(\.|$)")
+
+
+@contextlib.contextmanager
+def _shielded() -> Any:
+    """While the local cluster starts its worker processes (or closes): SIGINT ignored (a
+    child inherits SIG_IGN through exec and Python keeps it: the workers never see the
+    terminal's Ctrl-C, which reaches the whole process group, so they print no tracebacks; the
+    study stops them when it closes the cluster); SIGTERM and SIGHUP held until the cluster is
+    up (an interrupted start leaves a half-made cluster that Dask fails to close at exit).
+    Yields a list that holds the signals held. A Ctrl-C in these seconds is lost: press it
+    again."""
+    held: list[int] = []
+    if threading.current_thread() is not threading.main_thread():
+        yield held
+        return
+    old = {signal.SIGINT: signal.signal(signal.SIGINT, signal.SIG_IGN)}
+    for name in ("SIGTERM", "SIGHUP"):
+        if hasattr(signal, name):
+            sig = getattr(signal, name)
+            old[sig] = signal.signal(sig, lambda s, _f: held.append(s))
+    try:
+        yield held
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+
+
 def connect(workers: int | None, scheduler: str | None, threads: int | None
             ) -> tuple[Any, Any, int]:
     """(client, cluster or None, Numba threads per case). A local cluster of `workers`
     processes (default: one per two cores, at least one), or the scheduler at `scheduler`;
     threads per case default to cores // workers locally (no oversubscription), 1 on a
-    scheduler (its workers' cores are theirs to share)."""
+    scheduler (its workers' cores are theirs to share). The local cluster serves no dashboard
+    on a fixed port (":0": none in use, no "Port 8787 is already in use"), its workers ignore
+    Ctrl-C, and Dask's own messages stay quiet unless EMFABRIC_DASK_VERBOSE=1."""
     try:
         from dask.distributed import Client, LocalCluster
     except ImportError:
         raise StudyError("studies need Dask: pip install 'emfabric[studies]'") from None
+    _quiet_dask()
     cores = os.cpu_count() or 1
     if scheduler is not None:
         if workers is not None:
@@ -307,10 +368,20 @@ def connect(workers: int | None, scheduler: str | None, threads: int | None
     if n < 1:
         raise StudyError(f"--workers {n}: allowed: 1 or more")
     per_case = threads or max(1, cores // n)
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                           dashboard_address=None, silence_logs=50,
-                           env={"NUMBA_NUM_THREADS": str(per_case)})
-    return Client(cluster), cluster, per_case
+    with _shielded() as held:
+        # dashboard_address None: no dashboard; the scheduler's HTTP server (which it starts
+        # anyway) on any free port rather than 8787
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                               dashboard_address=None,
+                               scheduler_kwargs={"dashboard_address": ":0"},
+                               silence_logs=logging.WARNING if dask_verbose() else 50,
+                               env={"NUMBA_NUM_THREADS": str(per_case)})
+        client = Client(cluster)
+    if held:  # SIGTERM or SIGHUP while the workers started: stop now, cluster closed
+        client.close()
+        cluster.close()
+        raise KeyboardInterrupt
+    return client, cluster, per_case
 
 
 def run_cases(cases: list[Case], out: Path, client, threads: int, keep: bool,
@@ -341,10 +412,18 @@ def run_cases(cases: list[Case], out: Path, client, threads: int, keep: bool,
 def sweep(plan: Plan, out: str | Path, *, workers: int | None = None,
           scheduler: str | None = None, threads: int | None = None,
           progress: Callable[[int, int], None] | None = None) -> Outcome:
-    """Run the study's cases that have no stored result, then write DIR/results.nc."""
+    """Run the study's cases that have no stored result, then write DIR/results.nc. The folder
+    is held while the study runs (emfabric.io.lock: FolderInUse if another process holds it)."""
+    from emfabric.io.lock import folder_lock
+
     out = Path(out)
+    with folder_lock(out):
+        return _sweep(plan, out, workers, scheduler, threads, progress)
+
+
+def _sweep(plan: Plan, out: Path, workers: int | None, scheduler: str | None,
+           threads: int | None, progress: Callable[[int, int], None] | None) -> Outcome:
     t0 = time.perf_counter()
-    out.mkdir(parents=True, exist_ok=True)
     from emfabric.io.atomic import write_atomic
 
     text = _study_text(plan)  # the study as run, beside its results
@@ -356,9 +435,10 @@ def sweep(plan: Plan, out: str | Path, *, workers: int | None = None,
         try:
             run_cases(todo, out, client, per_case, plan.study.keep_histories, progress)
         finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            with _shielded():  # a second Ctrl-C does not break off the cluster's close
+                client.close()
+                if cluster is not None:
+                    cluster.close()
     results, failed = collect(plan, out)
     return Outcome(len(plan.cases), len(todo), reused, failed, results,
                    time.perf_counter() - t0)

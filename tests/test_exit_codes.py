@@ -1,0 +1,230 @@
+"""Exit statuses (docs/errors.md, issue 25 item 3): 2 for every input error, 1 for every
+runtime failure, 130 for an interrupt; I/O errors as one line, never a traceback."""
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+import pytest
+
+from emfabric.io.lock import folder_lock
+
+from conftest import run_demo
+
+EXE = [sys.executable, "-m", "emfabric"]
+TINY = ["--set=fabric.nodes=[11,11]", "--set=solver.end_time=2e-6", "-q"]
+
+
+def _cli(*args, **kw):
+    return subprocess.run([*EXE, *map(str, args)], capture_output=True, text=True, **kw)
+
+
+@pytest.fixture(scope="module")
+def done_run(tmp_path_factory):
+    """A finished tiny run to draw."""
+    return run_demo(tmp_path_factory.mktemp("done") / "run",
+                    {"fabric.nodes": [11, 11], "solver.end_time": 2e-6})
+
+
+def _one_error_line(r, *needles):
+    """stderr is one `error:` line holding the needles (no traceback)."""
+    assert "Traceback" not in r.stderr, r.stderr
+    lines = [line for line in r.stderr.splitlines() if line.strip()]
+    errors = [line for line in lines if line.startswith("error:")]
+    assert len(errors) == 1, r.stderr
+    for needle in needles:
+        assert needle in errors[0], r.stderr
+    return errors[0]
+
+
+def _blocked(tmp_path):
+    """A folder that cannot be created: under a plain file."""
+    (tmp_path / "afile").write_text("not a folder")
+    return tmp_path / "afile" / "sub"
+
+
+def test_input_errors_exit_2(tmp_path, done_run):
+    cases = {
+        "unknown key": (["run", "demo-small", "--set", "fabric.bogus=1", "--out",
+                         tmp_path / "a", *TINY], "fabric.bogus"),
+        "bad value": (["validate", "demo-small", "--set", "fabric.nodes=[1,1]"],
+                      "fabric.nodes"),
+        "missing scenario file": (["run", tmp_path / "nope.toml"], "nope.toml"),
+        "missing study file": (["sweep", tmp_path / "nope.toml", "--out", tmp_path / "s"],
+                               "nope.toml"),
+        "missing run folder": (["plot", tmp_path / "no-run"], "no-run"),
+        "unknown option": (["run", "demo-small", "--bogus"], "bogus"),
+        "option value": (["animate", done_run, "--no-mp4"], "--no-mp4"),
+        "figure format": (["field", "demo-small", "--plot", tmp_path / "f.xyz"], ".png"),
+        "resume without a checkpoint": (["run", "--resume", tmp_path / "empty"],
+                                        "no checkpoint"),
+    }
+    (tmp_path / "empty").mkdir()
+    for name, (args, needle) in cases.items():
+        r = _cli(*args)
+        assert r.returncode == 2, (name, r.stderr)
+        assert needle in r.stderr and "Traceback" not in r.stderr, (name, r.stderr)
+
+
+def test_unreadable_input_file_exits_2_in_one_line(tmp_path):
+    run_dir = tmp_path / "garbage"
+    run_dir.mkdir()
+    (run_dir / "history.nc").write_text("not netCDF")
+    r = _cli("plot", run_dir)
+    assert r.returncode == 2
+    _one_error_line(r, f"cannot read {run_dir / 'history.nc'}")
+    bad = tmp_path / "bad.toml"
+    bad.write_bytes(b"\xff\xfe")
+    r = _cli("validate", bad)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+
+
+def test_folder_in_use_exits_2(tmp_path):
+    out = tmp_path / "busy"
+    for args in (["run", "demo-small", "--out", out, *TINY], ["run", "--resume", out],
+                 ["sweep", tmp_path / "s.toml", "--out", out],
+                 ["ballistic-limit", "rupture", "--out", out],
+                 ["design-field", "demo-small", "--target-tilt", "0.1", "--by", "1e-4",
+                  "--out", out]):
+        (tmp_path / "s.toml").write_text('base = "demo-small"\n[axes]\n"field.B" = '
+                                         '[[0, 0, 0]]\n')
+        with folder_lock(out):
+            r = _cli(*args)
+        assert r.returncode == 2, (args, r.stderr)
+        _one_error_line(r, f"in use by emfabric pid {os.getpid()}")
+        assert sorted(p.name for p in out.iterdir()) == [], args  # nothing written
+
+
+def test_diverging_run_exits_1(tmp_path):
+    out = tmp_path / "div"
+    r = _cli("run", "demo-small", "--out", out, "--set=fabric.nodes=[11,11]",
+             "--set=field.E=[1e12,0,0]", "--set=solver.end_time=2e-5", "-q")
+    assert r.returncode == 1, r.stderr
+    assert "diverged" in r.stderr and "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("where", ["read-only folder", "under a file"])
+def test_plot_into_a_folder_that_cannot_be_written_exits_1_in_one_line(tmp_path, done_run,
+                                                                      where):
+    if where == "read-only folder":
+        if os.geteuid() == 0:
+            pytest.skip("root writes into read-only folders")
+        target = tmp_path / "ro"
+        target.mkdir()
+        target.chmod(0o555)
+        why = "Permission denied"
+    else:
+        target, why = _blocked(tmp_path), "Not a directory"
+    try:
+        r = _cli("plot", done_run, "--out", target)
+    finally:
+        if where == "read-only folder":
+            target.chmod(0o755)
+    assert r.returncode == 1, r.stderr
+    line = _one_error_line(r, "cannot write ", why)
+    assert str(target) in line and r.stdout == ""
+
+
+def test_field_plot_and_studies_that_cannot_write_exit_1(tmp_path):
+    blocked = _blocked(tmp_path)
+    r = _cli("field", "demo-small", "--plot", blocked / "field.png")
+    assert r.returncode == 1, r.stderr
+    _one_error_line(r, "cannot write ", str(blocked))
+    (tmp_path / "s.toml").write_text('base = "demo-small"\n[axes]\n"field.B" = [[0, 0, 0]]\n')
+    for args in (["sweep", tmp_path / "s.toml", "--out", blocked],
+                 ["ballistic-limit", "rupture", "--out", blocked],
+                 ["design-field", "demo-small", "--target-tilt", "0.1", "--by", "1e-4",
+                  "--out", blocked]):
+        r = _cli(*args)
+        assert r.returncode == 1, (args, r.stderr)
+        _one_error_line(r, f"cannot write {blocked}: Not a directory")
+
+
+def test_help_lists_the_exit_statuses():
+    r = _cli("--help")
+    assert r.returncode == 0 and "Exit status" in r.stdout and "130" in r.stdout
+
+
+def test_interrupted_sweep_prints_one_line_and_no_dask_noise(tmp_path):
+    """Ctrl-C at the terminal (SIGINT to the whole process group) while a case runs: exit 130,
+    one line saying what is kept and how to go on; no worker tracebacks, no "Port 8787 is
+    already in use" (held here on purpose)."""
+    pytest.importorskip("dask.distributed")
+    study = tmp_path / "s.toml"
+    study.write_text('base = "demo-small"\n[set]\n"fabric.nodes" = [11, 11]\n'
+                     '"fabric.charge_per_node" = 0.0\n"field.B" = [0, 0, 0]\n'
+                     '"projectile.velocity" = [0, 0, -1]\n"output.paraview" = false\n'
+                     '[axes]\n"solver.end_time" = [2e-6, 0.05]\n')
+    port = socket.socket()
+    try:
+        port.bind(("", 8787))
+        port.listen()
+    except OSError:
+        pass  # in use already: the same test
+    out = tmp_path / "out"
+    proc = subprocess.Popen([*EXE, "sweep", str(study), "--out", str(out), "--workers", "2",
+                             "-q"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 300
+        while proc.poll() is None and time.monotonic() < deadline:
+            if list((out / "cases").glob("*.json")) if (out / "cases").is_dir() else []:
+                break
+            time.sleep(0.2)
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.5)
+        os.killpg(proc.pid, signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=120)
+    finally:
+        port.close()
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    assert proc.returncode == 130, stderr
+    lines = [line for line in stderr.splitlines() if line.strip()]
+    assert lines == [f"interrupted: 1 of 2 cases finished and kept in {out / 'cases'}; run "
+                     f"the same command again to do the rest"], stderr
+    assert stdout == "" and not (out / ".emfabric.lock").exists()
+    assert json.loads(next((out / "cases").glob("*.json")).read_text())["status"] == "complete"
+
+
+@pytest.mark.parametrize("command", ["design-field", "ballistic-limit"])
+@pytest.mark.parametrize("when, code", [("before any run", 2), ("after runs", 1),
+                                        ("interrupted", 130)])
+def test_study_search_errors(tmp_path, monkeypatch, command, when, code):
+    """A search's error before any run is the input's (2), after runs the study's failure (1);
+    Ctrl-C: 130 with one line saying what is kept. (The searches are stand-ins here: the
+    real ones run in tests/test_study.py.)"""
+    from typer.testing import CliRunner
+
+    import emfabric.studies.ballistic as ballistic
+    import emfabric.studies.design as design
+    from emfabric.cli import app
+    from emfabric.studies.sweep import StudyError
+
+    def search(*args, progress=None, **kwargs):
+        if when != "before any run":
+            (tmp_path / "out" / "cases").mkdir(parents=True, exist_ok=True)
+            (tmp_path / "out" / "cases" / "k.json").write_text("{}")
+            progress(1)
+        if when == "interrupted":
+            raise KeyboardInterrupt
+        raise StudyError("no bracket")
+
+    monkeypatch.setattr(design, "design_field", search)
+    monkeypatch.setattr(ballistic, "ballistic_limit", search)
+    args = {"design-field": ["design-field", "demo-small", "--target-tilt", "0.1", "--by",
+                             "1e-4"],
+            "ballistic-limit": ["ballistic-limit", "rupture"]}[command]
+    r = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "out")])
+    assert r.exit_code == code, r.output
+    lines = [line for line in r.output.splitlines() if line.strip()]
+    assert len(lines) == 1, r.output
+    if code == 130:
+        assert lines[0].startswith("interrupted: ") and "1 finished runs are kept" in lines[0]
+    else:
+        assert lines[0] == "error: no bracket"
+    assert not (tmp_path / "out" / ".emfabric.lock").exists()
