@@ -4,13 +4,11 @@ from __future__ import annotations
 
 import json
 import signal
-import time
 from pathlib import Path
 from typing import Annotated
 
 import typer
 from rich.markup import escape
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 from rich.text import Text
 
@@ -120,41 +118,18 @@ def run(
     for name in ("SIGINT", "SIGTERM", "SIGHUP"):
         if hasattr(signal, name):
             signal.signal(getattr(signal, name), interrupt)
-    t_end = sc.solver.end_time
+    from emfabric.cli.progress import make_progress
+
     result = None
-    with Progress(
-        TextColumn("[bold]{task.description}"),
-        BarColumn(),
-        TextColumn("t = {task.fields[t]:7.2f} µs  Δt = {task.fields[dt]:.2e} s  "
-                   "K = {task.fields[k]}  {task.fields[rate]:7.1f} µs/min"),
-        TimeElapsedColumn(),
-        TimeRemainingColumn(),
-        console=console,
-        disable=quiet,
-        transient=False,
-    ) as bar:
-        task = bar.add_task(sc.name, total=t_end * 1e6, t=0.0, dt=0.0, k=0, rate=0.0)
-        wall0 = time.perf_counter()
-        last = [0.0]
-
-        def progress(state, info) -> None:
-            now = time.perf_counter()
-            if now - last[0] < 0.1:
-                return
-            last[0] = now
-            rate = state.t * 1e6 / max(now - wall0, 1e-9) * 60.0
-            bar.update(task, completed=state.t * 1e6, t=state.t * 1e6, dt=info.dt,
-                       k=info.iterations, rate=rate)
-
+    history = resume / "history.nc" if resume is not None else None
+    # a terminal: a live display that fits its width; a log or a pipe: a plain line every
+    # few seconds (cli/progress.py)
+    with make_progress(None, sc, console, quiet=quiet, history=history) as progress:
         try:
-            result = start(None if quiet else progress)
-            elapsed = max(time.perf_counter() - wall0, 1e-9)
-            bar.update(task, completed=t_end * 1e6, t=result.state.t * 1e6,
-                       rate=result.state.t * 1e6 / elapsed * 60.0)
+            result = start(progress)
         except KeyboardInterrupt as exc:
             result = getattr(exc, "result", None)
             if result is None:
-                bar.stop()
                 console.print("[yellow]interrupted[/] before the run started",
                               highlight=False)
                 raise typer.Exit(EXIT_INTERRUPTED) from None
@@ -162,12 +137,10 @@ def run(
                           f" continue with `emfabric run --resume {escape(str(out_dir))}`",
                           markup=True, highlight=False, soft_wrap=True)
         except (CheckpointError, ScenarioError, FolderInUse) as exc:
-            bar.stop()
             error(str(exc))
             raise typer.Exit(EXIT_INPUT) from None
         except OutputError as exc:  # a write failed (full disk, permissions): status failed
             result = getattr(exc, "result", None)
-            bar.stop()
             hint = (f"; once it can be written, `emfabric run --resume {out_dir}` continues "
                     f"from the last checkpoint" if (out_dir / CHECKPOINT).is_file() else "")
             error(f"{exc}{hint}")
