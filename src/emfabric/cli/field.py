@@ -52,8 +52,8 @@ def field(
     scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name")],
     at_time: Annotated[float, typer.Option("--time", help="Time [s]")] = 0.0,
     plot: Annotated[Path | None, typer.Option(
-        "--plot", help="Draw |B| over the sheet's plane and along the flight axis to this "
-                       "file (PNG, PDF, SVG)")] = None,
+        "--plot", help="Draw B (and the induced E) over the sheet's plane with the coils, "
+                       "and along the flight axis, to this file (PNG, PDF, SVG)")] = None,
     set_: Annotated[list[str] | None, typer.Option("--set", help="Override a value")] = None,
 ) -> None:
     """The applied field E [V/m] and B [T] at points given as --at X Y Z (repeat for more), as

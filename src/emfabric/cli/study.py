@@ -278,8 +278,16 @@ def ballistic_limit(
         raise typer.Exit(EXIT_FAILED if rounds else EXIT_INPUT) from None
     with writing(out):
         files = write_outputs(res, out)
+    for nm in res.get("non_monotone", []):
+        console.print("[yellow]warning:[/] non-monotone: a shot at "
+                      f"{nm['stopped']:.4g} m/s stopped " + (
+                          f"although one at {nm['perforated']:.4g} m/s perforated"
+                          if nm["perforated"] is not None else
+                          f"above V_BL = {res['v_bl']:.4g} m/s")
+                      + " (the limit is not sharp here: see ballistic.png; --seeds gives V50)",
+                      highlight=False, soft_wrap=True)
     if json_summary:
-        keep = ("v_bl", "v_bl_bracket", "lambert_jonas", "v50", "runs")
+        keep = ("v_bl", "v_bl_bracket", "lambert_jonas", "v50", "runs", "non_monotone")
         emit(json.dumps({k: res[k] for k in keep if k in res}))
     else:
         lj = res["lambert_jonas"]
