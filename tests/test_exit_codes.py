@@ -155,10 +155,12 @@ def test_interrupted_sweep_prints_one_line_and_no_dask_noise(tmp_path):
     already in use" (held here on purpose)."""
     pytest.importorskip("dask.distributed")
     study = tmp_path / "s.toml"
+    # the second case cannot end early: no projectile (no stop rule), 0.5 s of a sheet at rest
+    # (about 800 000 steps, minutes); the first ends at once
     study.write_text('base = "demo-small"\n[set]\n"fabric.nodes" = [11, 11]\n'
                      '"fabric.charge_per_node" = 0.0\n"field.B" = [0, 0, 0]\n'
-                     '"projectile.velocity" = [0, 0, -1]\n"output.paraview" = false\n'
-                     '[axes]\n"solver.end_time" = [2e-6, 0.05]\n')
+                     '"projectile.shape" = "none"\n"output.paraview" = false\n'
+                     '[axes]\n"solver.end_time" = [2e-6, 0.5]\n')
     port = socket.socket()
     try:
         port.bind(("", 8787))
