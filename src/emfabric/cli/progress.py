@@ -25,35 +25,9 @@ step, so the kernels' compile is not counted) × the simulated time still to run
 simulated time still to run is the one to the *expected end of contact* (`expected_end`), not
 only to `solver.end_time` (the line says which).
 
-Using it from ``emfabric run`` (src/emfabric/cli/run.py):
-
-1. Drop ``import time`` and ``from rich.progress import BarColumn, Progress, TextColumn,
-   TimeElapsedColumn, TimeRemainingColumn`` (nothing else there uses them).
-2. Replace everything from ``t_end = sc.solver.end_time`` to the end of the
-   ``with Progress(...) as bar:`` block with::
-
-       from emfabric.cli.progress import make_progress
-
-       result = None
-       history = resume / "history.nc" if resume is not None else None
-       with make_progress(None, sc, console, quiet=quiet, history=history) as progress:
-           try:
-               result = start(progress)
-           except KeyboardInterrupt as exc:
-               result = getattr(exc, "result", None)
-               console.print("[yellow]interrupted[/]: the history written so far is marked "
-                             f"partial; continue with `emfabric run --resume "
-                             f"{escape(str(out_dir))}`", markup=True, highlight=False)
-           except (CheckpointError, ScenarioError) as exc:
-               error(str(exc))
-               raise typer.Exit(2) from None
-           except Exception as exc:  # DivergenceError and friends
-               result = getattr(exc, "result", None)
-               error(str(exc))
-
-   (``start(None)`` with --quiet, as before; the old ``bar.stop()`` is not needed: a display
-   that saw no step leaves nothing behind.) The display ends, its last line written, when the
-   ``with`` block is left, before the summary is printed.
+``emfabric run`` (cli/run.py) wraps the run in ``with make_progress(None, sc, console,
+quiet=quiet, history=...) as progress:`` and passes ``progress`` (None with --quiet) to the
+runner as its progress callback.
 """
 
 from __future__ import annotations
