@@ -175,6 +175,13 @@ def test_interrupted_sweep_prints_one_line_and_no_dask_noise(tmp_path):
         port.listen()
     except OSError:
         pass  # in use already: the same test
+    # the kernels compiled first (a cold cache keeps the workers compiling for minutes, and
+    # a worker finishes its compile before it sees the interrupt: a separate, known latency)
+    subprocess.run([*EXE, "run", "demo-small", "--out", str(tmp_path / "warm"), "-q",
+                    "--set", "fabric.nodes=[11,11]", "--set", "fabric.charge_per_node=0.0",
+                    "--set", "field.B=[0,0,0]", "--set", "projectile.shape=none",
+                    "--set", "output.paraview=false", "--set", "solver.end_time=2e-6"],
+                   capture_output=True, check=True, timeout=1200)
     out = tmp_path / "out"
     proc = subprocess.Popen([*EXE, "sweep", str(study), "--out", str(out), "--workers", "2",
                              "-q"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
