@@ -226,3 +226,19 @@ def test_a_projectile_carrying_a_plug_has_perforated():
     st, m = res.state, res.model
     ahead = (st.node_x - st.body_x[:, None]).T @ m.flight_direction
     assert ahead.max() > -1.05 * m.geometry.bound
+
+
+def test_held_nodes_are_the_pieces_joined_to_the_frame():
+    """A 9 × 9 sheet cut along a column of warp segments falls in two pieces: with clamped
+    edges both stay held (each touches the frame); with free edges the larger (5 columns, 45
+    nodes) is the fabric and the other a fragment."""
+    from emfabric.sim.diagnostics import held_nodes
+
+    for edges, expected in (("clamped", 81), ("free", 45)):
+        m = build_model(fabric_only(**{"fabric.nodes": [9, 9], "fabric.edges": edges}))
+        ends = m.yarns.ends
+        alpha = np.where((ends[:, 1] - ends[:, 0] == 1) & (ends[:, 0] % 9 == 3), 0.0, 1.0)
+        held = held_nodes(m, alpha)
+        assert held.sum() == expected
+        if edges == "free":
+            assert not held.reshape(9, 9)[:, :4].any()

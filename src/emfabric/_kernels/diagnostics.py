@@ -282,3 +282,22 @@ def joined_to(ends, intact, anchor, out):
             held[_root(parent, i)] = True
     for i in range(n):
         out[i] = touched[i] and held[_root(parent, i)]
+
+
+@njit(cache=True)
+def piece_roots(ends, intact, out):
+    """out[n] = a label of the piece node n belongs to (joined through intact segments; the
+    same label for every node of a piece), −1 for a node with no intact segment."""
+    n = out.shape[0]
+    parent = np.arange(n)
+    touched = np.zeros(n, dtype=np.bool_)
+    for s in range(ends.shape[0]):
+        if intact[s]:
+            a = _root(parent, ends[s, 0])
+            b = _root(parent, ends[s, 1])
+            touched[ends[s, 0]] = True
+            touched[ends[s, 1]] = True
+            if a != b:
+                parent[max(a, b)] = min(a, b)
+    for i in range(n):
+        out[i] = _root(parent, i) if touched[i] else -1

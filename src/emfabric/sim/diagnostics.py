@@ -182,10 +182,10 @@ def measure(model: Model, state: State, row: np.ndarray) -> FabricDiagnostics:
 
 
 def held_nodes(model: Model, alpha: np.ndarray) -> np.ndarray:
-    """Nodes the fabric still holds: joined by intact yarns to a clamped node (free edges: to
-    the node that stays joined to most, found as the largest piece). The rest are fragments — a
-    lone node or a piece of yarn torn out — that the projectile may carry along while the
-    fabric they came from is behind."""
+    """Nodes the fabric still holds: joined by intact yarns to a clamped node (free edges: the
+    largest piece; one union-find pass either way). The rest are fragments — a lone node or a
+    piece of yarn torn out — that the projectile may carry along while the fabric they came
+    from is behind."""
     ends = model.yarns.ends
     intact = (alpha >= model.material.broken_below) & (model.yarns.stiffness > 0.0)
     fixed = (model.nodes.inv_mass == 0.0) & (model.nodes.mass > 0.0)
@@ -193,18 +193,13 @@ def held_nodes(model: Model, alpha: np.ndarray) -> np.ndarray:
     if fixed.any():
         _k.joined_to(ends, intact, fixed, out)
         return out
-    # free edges: the largest piece (each node's piece found by joining it alone)
-    best = np.zeros(model.node_count, dtype=bool)
-    left = np.zeros(model.node_count, dtype=bool)
-    left[ends[intact].ravel()] = True
-    while left.any():
-        seed = np.zeros(model.node_count, dtype=bool)
-        seed[int(np.flatnonzero(left)[0])] = True
-        _k.joined_to(ends, intact, seed, out)
-        if out.sum() > best.sum():
-            best = out.copy()
-        left &= ~out
-    return best
+    # free edges: the largest piece
+    root = np.empty(model.node_count, dtype=np.int64)
+    _k.piece_roots(ends, intact, root)
+    if not (root >= 0).any():
+        return out
+    largest = int(np.bincount(root[root >= 0]).argmax())
+    return root == largest
 
 
 def through_the_pack(model: Model, state: State, check_every: int = 1) -> bool:
