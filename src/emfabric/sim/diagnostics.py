@@ -25,6 +25,7 @@ from emfabric._kernels.records import (
 )
 from emfabric.sim.fastcall import Direct
 from emfabric.sim.model import Model
+from emfabric.sim.reach import out_of_reach
 from emfabric.sim.state import State
 from emfabric.sources.evaluate import fields_at
 
@@ -235,7 +236,9 @@ def left_for_good(model: Model, state: State, fab: FabricDiagnostics) -> str | N
     """'rebound' or 'perforation' once no node can reach the projectile any more (the run's
     stop rule), else None. A projectile that carries a plug of broken yarn (loose nodes still
     in contact) has perforated once the fabric that holds together is behind it
-    (through_the_pack)."""
+    (through_the_pack). A sheet that keeps ringing faster than the projectile recedes (a charged
+    sheet in a magnetic field) lets it go once its energy cannot carry a node to it
+    (emfabric.sim.reach.out_of_reach)."""
     if not model.has_body:
         return None
     if state.contact_count > 0:
@@ -250,6 +253,12 @@ def left_for_good(model: Model, state: State, fab: FabricDiagnostics) -> str | N
         return "perforation" if state.contact_steps else "never touched"
     if vb > 0 and state.contact_steps and through_the_pack(model, state, THROUGH_EVERY):
         return "perforation"
+    if vb != 0 and out_of_reach(model, state, fab.kinetic_energy, fab.strain_energy):
+        # the sheet still moves faster than the projectile recedes, but its energy can no
+        # longer carry any node to it (emfabric.sim.reach)
+        if not state.contact_steps:
+            return "never touched"
+        return "rebound" if vb < 0 else "perforation"
     return None
 
 
