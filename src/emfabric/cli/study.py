@@ -44,6 +44,22 @@ VerboseOpt = Annotated[bool, typer.Option(
                             "EMFABRIC_DASK_VERBOSE=1)")]
 
 
+def _warn_actuation(scenario, what: str) -> None:
+    """The plausibility warnings of a study's scenario (is the charge physical?
+    emfabric.sim.plausibility), once, before its runs: the runs on the workers keep theirs to
+    themselves (studies.sweep.run_case), which would print them once per case."""
+    from emfabric.cli.run import warn
+    from emfabric.sim.builder import build_model
+    from emfabric.sim.plausibility import actuation_report
+
+    try:
+        found = actuation_report(build_model(scenario))["warnings"]
+    except (ValueError, RuntimeError):
+        return  # the study reports an unbuildable scenario itself
+    for w in found:
+        warn(f"{what}: {w}")
+
+
 def _verbose(on: bool) -> None:
     if on:
         import os
@@ -107,6 +123,8 @@ def sweep(
         raise typer.Exit(EXIT_INPUT) from None
     _verbose(verbose)
     hold_folder(out)  # one study at a time in a folder: exit 2 naming the holder
+    if plan.cases:
+        _warn_actuation(plan.cases[0].scenario, "the study's first case")
     _stop_on_signals()
     bar = _progress(quiet)
     t0 = time.perf_counter()
@@ -199,6 +217,7 @@ def design_field(
         raise typer.Exit(EXIT_INPUT)
     _verbose(verbose)
     hold_folder(out)  # one study at a time in a folder: exit 2 naming the holder
+    _warn_actuation(sc, "the scenario")
     _stop_on_signals()
     # the search reports each round of runs: an error after one is the study's failure (1),
     # before any, an input error (2)
@@ -257,6 +276,7 @@ def ballistic_limit(
         raise typer.Exit(EXIT_INPUT)
     _verbose(verbose)
     hold_folder(out)  # one study at a time in a folder: exit 2 naming the holder
+    _warn_actuation(sc, "the scenario")
     _stop_on_signals()
     # the search reports each round of shots: an error after one is the study's failure (1),
     # before any, an input error (2)

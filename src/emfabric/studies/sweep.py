@@ -217,6 +217,13 @@ def run_case(text: str, out: str | None, threads: int) -> dict[str, Any]:
 
         # a case Dask runs again after its worker on another host was lost: its lock is void
         drop_foreign(out)
+    # the case's plausibility warnings (is the charge physical?) would print once per case
+    # from every worker: the command that started the study prints them once
+    # (cli.study._warn_actuation); the run's other messages pass. For good in this worker
+    # process (a filter per case would race between a worker's threads).
+    loop_log = logging.getLogger("emfabric.runner.loop")
+    if not any(isinstance(f, _WithoutPlausibility) for f in loop_log.filters):
+        loop_log.addFilter(_WithoutPlausibility())
     try:
         result = run(sc, out)
     except (DivergenceError, OSError, RuntimeError, ValueError, ArithmeticError) as exc:
@@ -227,6 +234,13 @@ def run_case(text: str, out: str | None, threads: int) -> dict[str, Any]:
     metrics = metrics_of(result)
     metrics["message"] = message or result.end_reason
     return metrics
+
+
+class _WithoutPlausibility(logging.Filter):
+    """Drops the log records of emfabric.sim.plausibility.log_warnings."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return not record.pathname.endswith("plausibility.py")
 
 
 def _failed(message: str, wall: float) -> dict[str, Any]:
