@@ -45,33 +45,33 @@ def test_a_node_between_four_clamps_reaches_the_height_its_energy_allows():
     projection, and a broken yarn leaves the other to bound it."""
     a, k = 0.01, 1.0e6
     rows, ply_rows, x0, inv_mass, rest = _three_by_three(a)
+
+    def reach(keff, energy, e, limit):
+        return fabric_reach(rows, ply_rows, x0, inv_mass, rest, keff, energy, e, limit, 4)
+
     keff = np.full(12, k)
     up = np.array([0.0, 0.0, 1.0])
     for energy in (1e-3, 1e-1):
         z_star = (2.0 * a * a * energy / k) ** 0.25
         # below the limit the kernel shares the energy (above it, it gives up: +inf)
-        bound = fabric_reach(rows, ply_rows, x0, inv_mass, rest, keff, energy, up,
-                             1.05 * z_star)
+        bound = reach(keff, energy, up, 1.05 * z_star)
         assert z_star <= bound <= 1.05 * z_star
-        assert fabric_reach(rows, ply_rows, x0, inv_mass, rest, keff, energy, up,
-                            0.999 * z_star) == math.inf
+        assert reach(keff, energy, up, 0.999 * z_star) == math.inf
     # a direction at 60° to the normal: at least the projection of the height reached
     oblique = np.array([math.sqrt(0.75), 0.0, 0.5])
     z_star = (2.0 * a * a * 1e-3 / k) ** 0.25
-    assert fabric_reach(rows, ply_rows, x0, inv_mass, rest, keff, 1e-3, oblique, 1.0) \
-        >= 0.5 * z_star
+    assert reach(keff, 1e-3, oblique, 1.0) >= 0.5 * z_star
     # the fill yarn broken: the warp alone (two halves sharing E) bounds the node
     energy = 1e-3
     broken = keff.copy()
     broken[6 + 1] = 0.0  # fill segment from node 1 to node 4
-    alone = fabric_reach(rows, ply_rows, x0, inv_mass, rest, broken, energy, up, 1.0)
+    alone = reach(broken, energy, up, 1.0)
     # two linear halves: 2 · ½ k (√(a² + z²) − a)² = E
     z_two = math.sqrt((a + math.sqrt(energy / k)) ** 2 - a * a)
     assert z_two * (1 - 1e-12) <= alone <= 1.1 * z_two
     # both yarns broken: nothing holds the node, no bound
     broken[2 + 1] = 0.0  # warp segment from node 4 to node 5
-    assert fabric_reach(rows, ply_rows, x0, inv_mass, rest, broken, energy, up, 1.0) \
-        == math.inf
+    assert reach(broken, energy, up, 1.0) == math.inf
 
 
 def test_a_field_driven_rebound_stops_when_the_sheet_cannot_reach_the_projectile(monkeypatch):

@@ -119,10 +119,11 @@ def _halves(rows, j0, j1, inv_mass, rest, keff, fam, clamp, length, comp):
 
 
 @njit(cache=True)
-def fabric_reach(rows, ply_rows, x0, inv_mass, rest, keff, energy, e, limit):
+def fabric_reach(rows, ply_rows, x0, inv_mass, rest, keff, energy, e, limit, first):
     """The largest x·e any free node of the clamped fabric can ever reach with at most
     `energy` in it (keff: each segment's lower-bound stiffness, 0 for a broken one), or +inf
-    as soon as a node's bound passes `limit` or a node hangs on no yarn clamped at both ends."""
+    as soon as a node's bound passes `limit` or a node hangs on no yarn clamped at both ends.
+    Node `first` is tried first (the one likeliest to fail: the test then ends at once)."""
     n = x0.shape[1]
     clamp = np.full((4, n), -1, dtype=np.int64)
     length = np.zeros((4, n))
@@ -133,7 +134,8 @@ def fabric_reach(rows, ply_rows, x0, inv_mass, rest, keff, energy, e, limit):
         _halves(rows, j0, j1, inv_mass, rest, keff, 0, clamp, length, comp)
         _halves(rows, j0, j1, inv_mass, rest, keff, 1, clamp, length, comp)
     reach = -math.inf
-    for node in range(n):
+    for idx in range(-1, n):
+        node = first if idx < 0 else idx
         if inv_mass[node] == 0.0:
             continue
         warp = clamp[0, node] >= 0 and clamp[1, node] >= 0
@@ -175,3 +177,48 @@ def fabric_reach(rows, ply_rows, x0, inv_mass, rest, keff, energy, e, limit):
             return math.inf
         reach = max(reach, bound)
     return reach
+
+
+@njit(cache=True)
+def _held(u, alpha, k, l2, rate, uc):
+    """Energy (lower bound: the linear spring) a segment holds stretched to U with the damage
+    eq. 2.6 gives it there."""
+    a = min(alpha, math.exp(-rate * max(u - uc, 0.0) / uc))
+    return 0.5 * a * k * l2 * (u - 1.0) ** 2
+
+
+@njit(cache=True)
+def least_stiffness(alpha, k, l2, brittle, rate, uc, fail2, energy, out):
+    """out[s] = the least axial stiffness segment s can have while the fabric holds at most
+    `energy` (k: its linear spring below the law, l2: L0²; 0 when broken). Returns False when
+    some segment could break (brittle: its energy at the failure strain is within reach) or
+    soften without bound (eq. 2.6 past the peak of the energy it holds)."""
+    for s in range(k.shape[0]):
+        al = alpha[s]
+        if not (k[s] > 0.0 and al > 0.0):
+            out[s] = 0.0
+            continue
+        if brittle:
+            ef = math.sqrt(fail2[s]) - 1.0
+            if 0.5 * al * k[s] * l2[s] * ef * ef <= energy:
+                return False
+            out[s] = al * k[s]
+            continue
+        if rate <= 0.0:
+            out[s] = al * k[s]
+            continue
+        # the energy held rises up to the later of the peak of (U − 1)² exp(−λ(U − U_c)/U_c)
+        # and the stretch where eq. 2.6 starts to lower the present α, then falls
+        top = max(1.0 + 2.0 * uc / rate, uc * (1.0 - math.log(al) / rate))
+        if _held(top, al, k[s], l2[s], rate, uc) <= energy:
+            return False
+        lo = 1.0
+        hi = top
+        for _ in range(BISECTIONS + 6):
+            mid = 0.5 * (lo + hi)
+            if _held(mid, al, k[s], l2[s], rate, uc) > energy:
+                hi = mid
+            else:
+                lo = mid
+        out[s] = min(al, math.exp(-rate * max(hi - uc, 0.0) / uc)) * k[s]
+    return True

@@ -67,41 +67,16 @@ def lower_stiffness(model: Model, alpha: np.ndarray, energy: float) -> np.ndarra
     """Each segment's least axial stiffness [N/m] while the fabric holds at most `energy`: the
     linear spring below its law (KSV: 𝔼A0/L0; Fung: c·H·A0/L0) times the least damage α it
     can fall to; 0 for a broken segment. None when some segment could break or soften
-    without bound with that energy."""
+    without bound with that energy (_kernels.reach.least_stiffness)."""
     mat, yarns = model.material, model.yarns
     k = yarns.stiffness * (mat.fung_h if mat.kind == MATERIAL_FUNG else 1.0)
-    l2 = yarns.rest_length ** 2
-    live = (k > 0.0) & (alpha > 0.0)
-    if mat.damage_law == DAMAGE_BRITTLE:
-        # the energy a segment holds at its failure strain, at least ½ k (L0 ε_f)²
-        ef = np.sqrt(yarns.failure_stretch2) - 1.0
-        if np.any(live & (0.5 * alpha * k * l2 * ef ** 2 <= energy)):
-            return None
-        return np.where(live, alpha * k, 0.0)
-    rate, uc = mat.damage_rate, mat.critical_stretch
-    if rate <= 0.0:
-        return np.where(live, alpha * k, 0.0)
-
-    def held(u: np.ndarray) -> np.ndarray:
-        """Energy (lower bound) a segment stretched to U holds with the damage U gives it."""
-        a = np.minimum(alpha, np.exp(-rate * np.maximum(u - uc, 0.0) / uc))
-        return 0.5 * a * k * l2 * (u - 1.0) ** 2
-
-    # held(U) rises up to the larger of the peak of (U − 1)² exp(−λ(U − U_c)/U_c) and the
-    # stretch where eq. 2.6 starts to lower the present α, then falls
-    switch = uc * (1.0 - np.log(np.maximum(alpha, 1e-300)) / rate)
-    top = np.maximum(1.0 + 2.0 * uc / rate, switch)
-    if np.any(live & (held(top) <= energy)):
+    brittle = mat.damage_law == DAMAGE_BRITTLE
+    fail2 = yarns.failure_stretch2 if brittle else np.zeros(1)
+    out = np.empty_like(k)
+    if not _k.least_stiffness(alpha, k, yarns.rest_length ** 2, brittle, mat.damage_rate,
+                              mat.critical_stretch, fail2, energy, out):
         return None
-    lo = np.ones_like(k)
-    hi = top.copy()
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        over = held(mid) > energy
-        hi = np.where(over, mid, hi)
-        lo = np.where(over, lo, mid)
-    floor = np.minimum(alpha, np.exp(-rate * np.maximum(hi - uc, 0.0) / uc))
-    return np.where(live, floor * k, 0.0)
+    return out
 
 
 def fabric_energy_bound(kinetic: float, strain: float) -> float:
@@ -117,12 +92,23 @@ def reach_along(model: Model, state: State, direction: np.ndarray, energy: float
     nodes = model.nodes
     if not np.any(nodes.inv_mass == 0.0):
         return float("inf")
+    e = np.ascontiguousarray(direction, dtype=float)
+    first = int(np.argmax(e @ state.node_x))  # the node farthest out now: tried first
+
+    def bound(keff: np.ndarray) -> float:
+        return float(_k.fabric_reach(nodes.rows, nodes.ply_rows, nodes.x0, nodes.inv_mass,
+                                     model.yarns.rest_length, keff, energy, e, limit, first))
+
+    # first with today's damage: softer yarns only reach farther, so a fail here is final
+    # and costs no search for the damage to come
+    mat = model.material
+    k = model.yarns.stiffness * (mat.fung_h if mat.kind == MATERIAL_FUNG else 1.0)
+    if bound(np.where(state.seg_alpha > 0.0, state.seg_alpha * k, 0.0)) > limit:
+        return float("inf")
     keff = lower_stiffness(model, state.seg_alpha, energy)
     if keff is None:
         return float("inf")
-    return float(_k.fabric_reach(nodes.rows, nodes.ply_rows, nodes.x0, nodes.inv_mass,
-                                 model.yarns.rest_length, keff, energy,
-                                 np.ascontiguousarray(direction, dtype=float), limit))
+    return bound(keff)
 
 
 def out_of_reach(model: Model, state: State, kinetic: float, strain: float) -> bool:
