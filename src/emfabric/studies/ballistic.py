@@ -112,7 +112,15 @@ def ballistic_limit(scenario: Scenario, out, *, seeds: int = 0, tolerance: float
                     progress=None) -> dict[str, Any]:
     """V_BL (bracket and bisect to `tolerance` m/s), the Lambert–Jonas fit above it, and with
     `seeds`, V50. Every shot is a stored case in out/cases (a rerun reuses them)."""
-    from emfabric.studies.sweep import Case, StudyError, case_key, connect, read_case, run_cases
+    from emfabric.studies.sweep import (
+        Case,
+        StudyError,
+        case_key,
+        connect,
+        read_case,
+        run_cases,
+        stop_workers_now,
+    )
 
     out = Path(out)
     v = np.asarray(scenario.projectile.velocity, dtype=float)
@@ -214,6 +222,10 @@ def ballistic_limit(scenario: Scenario, out, *, seeds: int = 0, tolerance: float
             rows = [r for r in fire(batch) if r["perforated"] in (0, 1)]
             result["v50"] = fit_v50([r["speed"] for r in rows], [r["perforated"] for r in rows])
             result["seeds"] = seeds
+    except KeyboardInterrupt:
+        if cluster is not None:
+            stop_workers_now()  # workers busy compiling would hold up the close for minutes
+        raise
     finally:
         if client is not None:
             client.close()

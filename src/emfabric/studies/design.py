@@ -102,7 +102,15 @@ def design_field(scenario: Scenario, tilt: float, by: float, out, *,
     from pathlib import Path
 
     from emfabric.sources.scaling import field_at_centre, scale_field
-    from emfabric.studies.sweep import Case, StudyError, case_key, connect, read_case, run_cases
+    from emfabric.studies.sweep import (
+        Case,
+        StudyError,
+        case_key,
+        connect,
+        read_case,
+        run_cases,
+        stop_workers_now,
+    )
 
     out = Path(out)
     est = estimate(scenario, tilt, by)
@@ -184,6 +192,10 @@ def design_field(scenario: Scenario, tilt: float, by: float, out, *,
                     hi = min(hi, s)
             lo = max([lo] + [s for s in scales if s < hi and probes[s].tilt < tilt])
             rounds += 1
+    except KeyboardInterrupt:
+        if cluster is not None:
+            stop_workers_now()  # workers busy compiling would hold up the close for minutes
+        raise
     finally:
         if client is not None:
             client.close()

@@ -448,6 +448,10 @@ def _sweep(plan: Plan, out: Path, workers: int | None, scheduler: str | None,
         client, cluster, per_case = connect(workers, scheduler, threads)
         try:
             run_cases(todo, out, client, per_case, plan.study.keep_histories, progress)
+        except KeyboardInterrupt:
+            if cluster is not None:
+                stop_workers_now()
+            raise
         finally:
             with _shielded():  # a second Ctrl-C does not break off the cluster's close
                 client.close()
@@ -456,6 +460,25 @@ def _sweep(plan: Plan, out: Path, workers: int | None, scheduler: str | None,
     results, failed = collect(plan, out)
     return Outcome(len(plan.cases), len(todo), reused, failed, results,
                    time.perf_counter() - t0)
+
+
+def stop_workers_now() -> None:
+    """Interrupted: end the local cluster's worker processes at once (SIGTERM, then SIGKILL
+    after a second). A worker compiling kernels (minutes on an empty cache) holds the
+    interpreter and answers the cluster's polite close only when it is done; the cases they
+    were running are lost either way (a study keeps only finished cases) and run again next
+    time."""
+    import multiprocessing
+
+    children = multiprocessing.active_children()
+    for proc in children:
+        proc.terminate()
+    deadline = time.monotonic() + 1.0
+    for proc in children:
+        proc.join(max(0.0, deadline - time.monotonic()))
+        if proc.is_alive():
+            proc.kill()
+            proc.join(1.0)
 
 
 def _study_text(plan: Plan) -> str:
