@@ -12,7 +12,8 @@ paper-field > my.toml` and then `emfabric run my.toml`). That directory holds sy
 the repository's scripts/ and benchmarks/ and shrunk copies of studies/*.toml, as a clone's root
 would. Run alone (`-k`), a command first replays the ones before it in its document.
 
-`emfabric ...` runs as `sys.executable -m emfabric ...`, with the overrides of SHRINK appended
+`emfabric ...` runs in this process (the command-line app through typer's CliRunner, in the
+working directory: no new interpreter per command), with the overrides of SHRINK appended
 for the kinds of command that would run for minutes (options given later win, so these replace a
 command's own end_time or tolerance). What cannot run in a test is listed in SKIP with the reason;
 everything else must exit 0 (or the code in EXIT).
@@ -255,6 +256,38 @@ def _script_help(argv: tuple[str, ...]) -> subprocess.CompletedProcess:
     return subprocess.run(argv, cwd=ROOT, capture_output=True, text=True, timeout=TIMEOUT)
 
 
+def _in_process(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    """`emfabric ARGS` run in this process (typer's CliRunner, in cwd): the same command-line
+    app as the console script, without a new interpreter that imports the package and loads
+    the compiled kernels again for each of the ~50 commands (minutes of the suite). What a
+    command changes in the process is put back: Numba's thread count, the signal handlers.
+    The console script itself is run as a subprocess by tests/test_cli.py and .ci/run."""
+    import contextlib
+    import signal
+
+    import numba
+    from typer.testing import CliRunner
+
+    from emfabric.cli import app
+
+    threads = numba.get_num_threads()
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM,
+                                                        signal.SIGHUP)}
+    try:
+        with contextlib.chdir(cwd):
+            res = CliRunner().invoke(app, args, catch_exceptions=True)
+    finally:
+        numba.set_num_threads(threads)
+        for sig, handler in handlers.items():
+            signal.signal(sig, handler)
+    stderr = res.stderr
+    if res.exception is not None and not isinstance(res.exception, SystemExit):
+        import traceback
+
+        stderr += "".join(traceback.format_exception(res.exception))
+    return subprocess.CompletedProcess(["emfabric", *args], res.exit_code, res.stdout, stderr)
+
+
 def execute(cmd: Command, cwd: Path) -> None:
     """Run one planned command in cwd; fail with its output if it does not do what is said."""
     p = plan(cmd)
@@ -262,6 +295,8 @@ def execute(cmd: Command, cwd: Path) -> None:
         pytest.skip(p.reason)
     if p.script_flags or p.reason == "script":
         res = _script_help(tuple(p.argv))
+    elif p.argv[1:3] == ["-m", "emfabric"]:
+        res = _in_process(p.argv[3:], cwd)
     else:
         res = subprocess.run(p.argv, cwd=cwd, capture_output=True, text=True, timeout=TIMEOUT)
     shown = " ".join(shlex.quote(a) for a in p.argv)
