@@ -19,7 +19,7 @@ import sys
 # isort: off
 from emfabric.cli import run, field, plot, study, materials  # noqa: F401
 # isort: on
-from emfabric.cli.app import EXIT_FAILED, EXIT_INPUT, app, error
+from emfabric.cli.app import EXIT_FAILED, EXIT_INPUT, EXIT_INTERRUPTED, app, error
 from emfabric.config.scenario import ScenarioError
 
 
@@ -32,6 +32,10 @@ def main() -> None:  # pragma: no cover - console entry
 
     try:
         app()
+    except SystemExit as exc:
+        if exc.code == EXIT_INTERRUPTED:
+            _exit_within(EXIT_GRACE)
+        raise
     except (ScenarioError, FolderInUse) as err:
         error(str(err))
         sys.exit(EXIT_INPUT)
@@ -43,6 +47,28 @@ def main() -> None:  # pragma: no cover - console entry
         else:
             error(str(err))
         sys.exit(EXIT_FAILED)
+
+
+EXIT_GRACE = 15.0
+"""[s] An interrupted command that has said what it kept is gone this long after, whatever is
+still winding down in the interpreter (a study's Dask threads and exit handlers)."""
+
+
+def _exit_within(seconds: float) -> None:
+    """Exit 130 within `seconds` even if the interpreter's shutdown waits on something: a
+    daemon timer (the command has returned: its files are written and its folder's lock
+    released)."""
+    import os
+    import threading
+
+    def leave() -> None:
+        sys.stderr.flush()
+        sys.stdout.flush()
+        os._exit(EXIT_INTERRUPTED)
+
+    timer = threading.Timer(seconds, leave)
+    timer.daemon = True
+    timer.start()
 
 
 __all__ = ["app", "main"]

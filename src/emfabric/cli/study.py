@@ -76,6 +76,7 @@ def _interrupted(out: Path, what: str) -> typer.Exit:
     return typer.Exit(EXIT_INTERRUPTED)
 
 
+
 def _stop_on_signals() -> None:
     """SIGTERM and SIGHUP (a job scheduler's stop, a closed terminal) stop a study like Ctrl-C:
     the finished cases are on disk already, the local cluster is shut down."""

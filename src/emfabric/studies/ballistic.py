@@ -118,8 +118,8 @@ def ballistic_limit(scenario: Scenario, out, *, seeds: int = 0, tolerance: float
         case_key,
         connect,
         read_case,
+        release,
         run_cases,
-        stop_workers_now,
     )
 
     out = Path(out)
@@ -131,6 +131,7 @@ def ballistic_limit(scenario: Scenario, out, *, seeds: int = 0, tolerance: float
         raise StudyError(f"--tolerance {tolerance}: allowed: a positive speed [m/s]")
     shots: list[dict[str, Any]] = []
     client = cluster = None
+    interrupted = False
     per_case = 1
 
     def fire(scenarios: list[tuple[float, int | None, Scenario]]) -> list[dict[str, Any]]:
@@ -223,14 +224,11 @@ def ballistic_limit(scenario: Scenario, out, *, seeds: int = 0, tolerance: float
             result["v50"] = fit_v50([r["speed"] for r in rows], [r["perforated"] for r in rows])
             result["seeds"] = seeds
     except KeyboardInterrupt:
-        if cluster is not None:
-            stop_workers_now()  # workers busy compiling would hold up the close for minutes
+        interrupted = True
         raise
     finally:
         if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+            release(client, cluster, interrupted)
     result["shots"] = shots
     result["runs"] = len(shots)
     result["scenario"] = scenario.name

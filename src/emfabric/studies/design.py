@@ -108,8 +108,8 @@ def design_field(scenario: Scenario, tilt: float, by: float, out, *,
         case_key,
         connect,
         read_case,
+        release,
         run_cases,
-        stop_workers_now,
     )
 
     out = Path(out)
@@ -127,6 +127,7 @@ def design_field(scenario: Scenario, tilt: float, by: float, out, *,
         return Case((len(probes),), {"scale": s}, sc, case_key(text), text)
 
     client = cluster = None
+    interrupted = False
     per_case = 1
     try:
         def measure(scales: list[float]) -> None:
@@ -193,14 +194,11 @@ def design_field(scenario: Scenario, tilt: float, by: float, out, *,
             lo = max([lo] + [s for s in scales if s < hi and probes[s].tilt < tilt])
             rounds += 1
     except KeyboardInterrupt:
-        if cluster is not None:
-            stop_workers_now()  # workers busy compiling would hold up the close for minutes
+        interrupted = True
         raise
     finally:
         if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+            release(client, cluster, interrupted)
     b_centre = field_at_centre(scale_field(scenario, hi), by)
     return {"scale": hi, "B_centre": b_centre, "B_centre_norm": float(np.linalg.norm(b_centre)),
             "estimate_eq54": est.B, "target_tilt": tilt, "by": by, "bracket": [lo, hi],

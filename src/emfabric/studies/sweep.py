@@ -446,20 +446,39 @@ def _sweep(plan: Plan, out: Path, workers: int | None, scheduler: str | None,
     reused = len(plan.cases) - len(todo)
     if todo:
         client, cluster, per_case = connect(workers, scheduler, threads)
+        interrupted = False
         try:
             run_cases(todo, out, client, per_case, plan.study.keep_histories, progress)
         except KeyboardInterrupt:
-            if cluster is not None:
-                stop_workers_now()
+            interrupted = True
             raise
         finally:
-            with _shielded():  # a second Ctrl-C does not break off the cluster's close
-                client.close()
-                if cluster is not None:
-                    cluster.close()
+            release(client, cluster, interrupted)
     results, failed = collect(plan, out)
     return Outcome(len(plan.cases), len(todo), reused, failed, results,
                    time.perf_counter() - t0)
+
+
+INTERRUPTED_CLOSE = 10.0
+"""[s] How long an interrupted study waits for Dask to close its client and cluster."""
+
+
+def release(client, cluster, interrupted: bool) -> None:
+    """Close the client and the local cluster (if any). Interrupted: the local workers are
+    ended first (stop_workers_now) and Dask's close is bounded (INTERRUPTED_CLOSE): nothing a
+    study keeps depends on it, and the user is waiting. A second Ctrl-C does not break off the
+    close."""
+    with _shielded():
+        if interrupted and cluster is not None:
+            stop_workers_now()
+        wait = {"timeout": INTERRUPTED_CLOSE} if interrupted else {}
+        try:
+            client.close(**wait)
+            if cluster is not None:
+                cluster.close(**wait)
+        except (TimeoutError, OSError, RuntimeError):
+            if not interrupted:
+                raise
 
 
 def stop_workers_now() -> None:
