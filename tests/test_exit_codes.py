@@ -157,6 +157,10 @@ def _status(path) -> str | None:
         return None
 
 
+def _default_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def test_interrupted_sweep_prints_one_line_and_no_dask_noise(tmp_path):
     """Ctrl-C at the terminal (SIGINT to the whole process group) while a case runs: exit 130,
     one line saying what is kept and how to go on; no worker tracebacks, no "Port 8787 is
@@ -183,9 +187,12 @@ def test_interrupted_sweep_prints_one_line_and_no_dask_noise(tmp_path):
                     "--set", "output.paraview=false", "--set", "solver.end_time=2e-6"],
                    capture_output=True, check=True, timeout=1200)
     out = tmp_path / "out"
+    # Ctrl-C as at a terminal: SIGINT's default disposition in the command (a suite started in
+    # the background by a non-interactive shell inherits SIGINT ignored, and Python then
+    # installs no KeyboardInterrupt handler: the signal would do nothing)
     proc = subprocess.Popen([*EXE, "sweep", str(study), "--out", str(out), "--workers", "2",
                              "-q"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, start_new_session=True)
+                            text=True, start_new_session=True, preexec_fn=_default_sigint)
     try:
         deadline = time.monotonic() + 300
         while proc.poll() is None and time.monotonic() < deadline:
