@@ -191,7 +191,7 @@ def _fill_fields_typed(grid, fld, x, v, dt, t, out):
 def map_fields(axes, size, step, values, x, e, b):
     """e, b plus the field map's E and B at x (trilinear; nothing outside the map); axes None:
     e, b unchanged. Compiled by the type of `axes`, as loop_fields."""
-    if axes is None:
+    if axes is None or axes.shape[1] == 0:
         return e, b
     return _map_lookup(axes, size, step, values, x, e, b)
 
@@ -204,6 +204,8 @@ def _map_fields_typed(axes, size, step, values, x, e, b):
         return no_map
 
     def with_map(axes, size, step, values, x, e, b):
+        if axes.shape[1] == 0:  # a record of sources without a map (sources.build.one_type)
+            return e, b
         return _map_lookup(axes, size, step, values, x, e, b)
     return with_map
 

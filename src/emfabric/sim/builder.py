@@ -32,7 +32,7 @@ from emfabric._kernels.shapes import SHAPES
 from emfabric.config.scenario import Scenario, ScenarioError
 from emfabric.sim.geometry import initial_pose
 from emfabric.sim.model import Model, Options
-from emfabric.sources.build import build_field, nodes_outside_map
+from emfabric.sources.build import build_field, nodes_outside_map, one_type
 from emfabric.sources.grid import build_source_grid
 
 log = logging.getLogger(__name__)
@@ -176,8 +176,9 @@ def _assemble(scenario: Scenario) -> Model:
             broken_below=float(fab.damage.broken_below),
             damage_law=DAMAGE_BRITTLE if fab.damage.brittle else DAMAGE_ZOHDI,
         ),
-        field=build_source_grid(build_field(scenario), node_x0, scenario.field.grid_cells,
-                                scenario.field.grid_tolerance, scenario.field.grid),
+        field=one_type(build_source_grid(build_field(scenario), node_x0,
+                                         scenario.field.grid_cells,
+                                         scenario.field.grid_tolerance, scenario.field.grid)),
         body=Body(
             active=has_body,
             shape=SHAPES.get(pr.shape, SHAPE_SPHERE),  # "none": no body, shape unused

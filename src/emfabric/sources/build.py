@@ -147,9 +147,24 @@ def read_field_map(path: str, scale: float, key: str) -> dict:
             "map_values": values, "map_has_e": bool(np.any(values[..., :3] != 0.0))}
 
 
+def one_type(fld: Field) -> Field:
+    """The record with every absent source member (loops, map, grid) an empty array once any
+    source is present, so that every field with sources has one Numba type: a run compiles
+    its step kernels once for a coil, a map, magnets or any mix of them (the kernels test the
+    sizes at run time; emfabric._kernels.fields). A uniform field keeps its None members,
+    which compile the source lookups away from the node kernel's vectorised loops."""
+    if fld.loops is None and fld.map_axes is None and fld.grid_values is None:
+        return fld
+    return fld._replace(
+        loops=np.zeros((0, 8)) if fld.loops is None else fld.loops,
+        map_axes=np.zeros((3, 0)) if fld.map_axes is None else fld.map_axes,
+        grid_values=np.zeros((0, 1, 1, 1, 6)) if fld.grid_values is None else fld.grid_values,
+    )
+
+
 def nodes_outside_map(fld: Field, points: np.ndarray) -> int:
     """How many of the points (3, N) lie outside the field map's box (0 without a map)."""
-    if fld.map_axes is None:
+    if fld.map_axes is None or fld.map_axes.shape[1] == 0:
         return 0
     inside = np.ones(points.shape[1], dtype=bool)
     for c in range(3):

@@ -22,6 +22,6 @@ def fields_at(fld: Field, points: Sequence[Sequence[float]], t: float = 0.0
     e = np.empty_like(pts)
     b = np.empty_like(pts)
     fields_at_points(fld, pts, float(t), e, b)
-    if fld.grid_values is None and fld.magnets.shape[0]:
+    if (fld.grid_values is None or fld.grid_values.shape[0] == 0) and fld.magnets.shape[0]:
         b += magnet_fields(fld.magnets, pts)
     return e, b

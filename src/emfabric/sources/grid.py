@@ -104,7 +104,7 @@ def build_source_grid(fld: Field, x0: np.ndarray, cells: int, tolerance: float,
                       loops_in_grid: bool = True) -> Field:
     """The Field record with its source grid over the reach of the fabric whose nodes start at
     x0 (3, N); unchanged if it has neither loops (in the grid) nor magnets."""
-    loops = fld.loops if (fld.loops is not None and loops_in_grid) else None
+    loops = fld.loops if (fld.loops is not None and fld.loops.shape[0] and loops_in_grid) else None
     has_magnets = fld.magnets.shape[0] > 0
     if loops is None and not has_magnets:
         return fld
