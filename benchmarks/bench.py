@@ -146,8 +146,9 @@ def deformed_sheet(n: int, overrides: dict | None = None):
     from emfabric.sim.builder import build_model
     from emfabric.sim.state import initial_state, update_forces
 
+    # no outputs are written: output.paraview off keeps a large sheet within the output guard
     sc = load_scenario(SCENARIO, {"fabric.nodes": [n, n], "projectile.shape": "none",
-                                  **(overrides or {})})
+                                  "output.paraview": False, **(overrides or {})})
     model = build_model(sc)
     # the row-block threaded kernel, whatever the size (the default below 250 × 250 nodes is
     # the serial one): its 1-thread and N-thread rows are the figures (a) has always shown
@@ -177,7 +178,8 @@ def iterate_args(integ, s, s2, dt: float) -> tuple:
     work = integ.work
     work.xbuf[:] = s.node_x
     # as an attempt does: where the damage law can change α (the kernel skips it elsewhere)
-    damage_thresholds(s.seg_alpha, integ.physics.material, work.damage_thr, work.damage_alpha)
+    damage_thresholds(s.seg_alpha, integ.physics.material, integ.physics.yarns.failure_stretch2,
+                      work.damage_thr, work.damage_alpha)
     return (integ.physics, work.xbuf, s.arrays, s2.arrays, work, *integ.kernel_buffers,
             s.t + dt, integ.solver.phi, dt)
 
@@ -305,6 +307,28 @@ def bench_evaluation(n: int, threads: list[int], repeats: int, use_warp: bool) -
 
         res["warp"] = best_and_median(warp_calls, repeats)
     return res
+
+
+def print_gpu(info: dict, rows: list[dict]) -> None:
+    """(k): the evaluation of (a) on a GPU (gpu.py's JSON), beside this run's (a)."""
+    say(f"(k) the same evaluation on a GPU with numba.cuda (benchmarks/gpu.py, "
+        f"cuda_kernels.py): {info['device']}, numba {info['numba']}, best of {info['repeat']} "
+        f"samples of {info['count']} evaluations")
+    say(f"    {'grid':>11} | {'GPU ns/seg':>10} {'µs/eval':>8} {'GB/s':>6} | "
+        f"{'from Python µs/eval':>19} | {'(a) best CPU µs/eval':>20} {'÷ GPU':>7} | check")
+    cpu = {r["n"]: min(v[0] for v in r["emf"].values()) for r in rows}
+    for c in info["cases"]:
+        n, segs = c["n"], c["segments"]
+        here = cpu.get(n)
+        ratio = f"{here / c['gpu_s']:6.0f}×" if here else "    n/a"
+        here_s = f"{here * 1e6:20.1f}" if here else f"{'n/a':>20}"
+        say(f"    {n:>5}×{n:<5} | {c['gpu_s'] / segs * 1e9:10.3f} {c['gpu_s'] * 1e6:8.2f} "
+            f"{c['bytes'] / c['gpu_s'] / 1e9:6.0f} | {c['python_s'] * 1e6:19.1f} | {here_s} "
+            f"{ratio} | max rel. diff {c['max_rel_diff']:.1e} ({c['worst_array']})")
+    say("    GPU time: the kernels back to back (a spin kernel holds the GPU while the "
+        "evaluations queue); from Python: launched one by one from a Python loop. The CPU "
+        "column is this run's (a) on this machine, the GPU's a run on another.")
+    say()
 
 
 def print_evaluations(rows: list[dict], threads: list[int], warp_note: str,
@@ -1210,6 +1234,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--no-cold", action="store_true",
                    help="skip the cold-cache start-up (it recompiles every kernel)")
     p.add_argument("--no-warp", action="store_true", help="leave Warp out of (a)")
+    p.add_argument("--gpu-json", type=Path, metavar="FILE",
+                   help="(k): print beside (a) the GPU figures of `gpu.py run --json FILE` "
+                        "(the same evaluation with numba.cuda on a GPU machine)")
     p.add_argument("--schemes", action="store_true",
                    help="only weigh solver settings on paper-field against (e)'s converged "
                         "run (minutes)")
@@ -1322,6 +1349,8 @@ def main(argv: list[str] | None = None) -> None:
     print_evaluations(rows, threads, warp_note, bandwidth)
     busy_note(section)
     say()
+    if a.gpu_json is not None:
+        print_gpu(json.loads(a.gpu_json.read_text()), rows)
 
     fr = None
     if not (a.quick or a.no_full_run):
