@@ -99,9 +99,10 @@ def test_a_mistake_in_set_is_told_in_the_keys_terms(text, line):
 def test_a_rule_of_the_whole_scenario_names_its_keys():
     """A rule between sections is its own line, without pydantic's prefix or a `{...}`."""
     with pytest.raises(ScenarioError) as info:
-        load_scenario("demo-small", {"fabric.plies": 3, "solver.integrator": "phi"})
+        load_scenario("demo-small", {"contact.placement": "closest-point",
+                                     "solver.integrator": "central-difference"})
     line = str(info.value).split("\n")[1]
-    assert line.startswith("  fabric.plies = 3 with solver.integrator = 'phi': a pack of plies")
+    assert line.startswith("  contact.placement = 'closest-point' is an option of the φ-scheme")
     assert not any(word in str(info.value) for word in PYDANTIC_WORDS)
 
 

@@ -102,6 +102,14 @@ def step_energy(phys, sin, sout, nc, work, t0, phi, dt, out):
             d_proj += (f1[c, n] - fm[c]) * delta
 
     d_dam = damage_release(yarns, mat, x0, x1, sin.alpha, sout.alpha, phi)
+    # a pack: the work of ply contact's forces (stored in the penalty while plies press,
+    # dissipated by its damping and friction) is booked as contact dissipation, −Δt ψ̄·v̄
+    if nodes.ply_nodes.shape[0] > 2:
+        fp0, fp1 = work.ply_force0, work.ply_force
+        for n in range(x0.shape[1]):
+            for c in range(3):
+                d_cont -= dt * (phi * fp1[c, n] + (1.0 - phi) * fp0[c, n]) * 0.5 * (
+                    v0[c, n] + v1[c, n])
     out[ENERGY_WORK_FIELD] += w_field
     out[ENERGY_WORK_GRAVITY] += w_grav
     out[ENERGY_FRICTION] += d_fric

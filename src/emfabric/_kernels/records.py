@@ -288,9 +288,13 @@ class Contact(NamedTuple):
     """For each node, its nearest node in the reference state of the ply above (row 0) and of
     the ply below (row 1), −1 where there is none, (2, node_count) int64: where the walk to the
     nearest node starts (a state-free start: a restarted run walks the same way)."""
-    ply_quantum: np.ndarray = np.ones(2)
-    """The units [N s] and [kg m] in which ply contact sums impulses and mass-weighted
-    placements exactly (integers: the sum does not depend on the order), (2,)."""
+    ply_quantum: np.ndarray = np.ones(3)
+    """The units [N s], [kg m] and [N] in which ply contact sums impulses, mass-weighted
+    placements and (the φ-scheme's) forces exactly (integers: the sum does not depend on the
+    order), (3,)."""
+    ply_stiffness: np.ndarray = np.zeros(0)
+    """The φ-scheme's ply contact (plies.ply_forces): the normal stiffness [N/m] of a node's
+    whole share against the neighbouring ply, per pair of plies p, p + 1, (plies − 1,)."""
 
 
 class Solver(NamedTuple):
@@ -449,6 +453,13 @@ class Work(NamedTuple):
     ply_acc: np.ndarray
     """Ply contact's exact sums per node (int64, in Contact.ply_quantum units): the impulse
     and the mass-weighted placement, (2, 3, node_count)."""
+    ply_force: np.ndarray
+    """The φ-scheme's ply contact force on each node at the current iterate [N], (3,
+    node_count); (3, 1) for one ply."""
+    ply_force0: np.ndarray
+    """The same at the start of the step (the energy bookkeeping's), (3, node_count)."""
+    ply_normals: np.ndarray
+    """Every ply's surface normal at its nodes (plies._normals), (3, node_count)."""
 
 
 def pack_tables(grids) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -495,4 +506,6 @@ def make_work(node_count: int, row_count: int, seg_total: int, seg_count: int = 
                 np.empty((2, nmax)), np.empty((3, nmax)), np.empty((3, nmax)),
                 np.empty((3, nmax)), np.zeros((6, n)), np.empty(nmax), np.zeros((2, 3)),
                 np.zeros(seg_total), np.full(seg_total, np.nan), np.zeros((7, 3)),
-                np.zeros((2, 3, n if plies > 1 else 1), dtype=np.int64))
+                np.zeros((2, 3, n if plies > 1 else 1), dtype=np.int64),
+                np.zeros((3, n if plies > 1 else 1)), np.zeros((3, n if plies > 1 else 1)),
+                np.zeros((3, n if plies > 1 else 1)))

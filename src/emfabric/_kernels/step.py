@@ -25,14 +25,18 @@ from emfabric._kernels.fields import (
     electric_at_nodes,
     fill_node_fields,
     fill_node_fields_threads,
+    node_field,
     with_sources,
 )
 from emfabric._kernels.materials import damage_thresholds
 from emfabric._kernels.nodes import fused_iterate, fused_iterate_threads
+from emfabric._kernels.plies import ply_forces
 from emfabric._kernels.records import (
     BODY_V,
     BODY_W,
     BODY_X,
+    ROW_COUNT,
+    ROW_NODE,
     SUM_ERROR_DEN,
     SUM_ERROR_NUM,
     StateArrays,
@@ -74,6 +78,58 @@ def fabric_iterate(phys, prev, sin, sout, work, rowbuf, threads, t1, phi, dt):
             fused_iterate_threads(phys, prev, sin, sout, work, t1, phi, dt, threads)
     else:
         fused_iterate(phys, prev, sin, sout, work, t1, phi, dt, rowbuf)
+
+
+@njit(cache=True)
+def ply_update(phys, work, x1, v1, f1, xk, x0, t1, phi, dt):
+    """Add the ply contact force work.ply_force (plies.ply_forces at the iterate xk) to the
+    φ-update of the nodes it acts on: the update is linear in the force, so its share is
+    Δv = M(u)·(φΔt/m) F (M the closed-form inverse of the magnetic part, u = φΔt q B/m with the
+    B the node update used), Δx = φΔt Δv, Δf = F + q Δv × B; the rows' error sums follow the
+    moved nodes (contact candidates' are computed later, from the final positions)."""
+    nodes, fld = phys.nodes, phys.field
+    fp = work.ply_force
+    sums = work.row_sums
+    flag = work.flag
+    inv_mass, charge = nodes.inv_mass, nodes.charge
+    for j in range(nodes.rows.shape[0]):
+        nb = nodes.rows[j, ROW_NODE]
+        for n in range(nb, nb + nodes.rows[j, ROW_COUNT]):
+            if (fp[0, n] == 0.0 and fp[1, n] == 0.0 and fp[2, n] == 0.0) or inv_mass[n] == 0.0:
+                continue
+            q = charge[n]
+            _e, b = node_field(fld, work.node_field, n, (xk[0, n], xk[1, n], xk[2, n]), t1)
+            h = phi * dt * inv_mass[n]
+            s = h * q
+            u0, u1, u2 = s * b[0], s * b[1], s * b[2]
+            a0, a1, a2 = h * fp[0, n], h * fp[1, n], h * fp[2, n]
+            au = (a0 * u0 + a1 * u1) + a2 * u2
+            inv = 1.0 / (1.0 + ((u0 * u0 + u1 * u1) + u2 * u2))
+            d0 = ((a0 + (a1 * u2 - a2 * u1)) + au * u0) * inv
+            d1 = ((a1 + (a2 * u0 - a0 * u2)) + au * u1) * inv
+            d2 = ((a2 + (a0 * u1 - a1 * u0)) + au * u2) * inv
+            if flag[n] == 0:
+                e_old = math.sqrt((x1[0, n] - xk[0, n]) ** 2 + (x1[1, n] - xk[1, n]) ** 2
+                                  + (x1[2, n] - xk[2, n]) ** 2)
+                g_old = math.sqrt((x1[0, n] - x0[0, n]) ** 2 + (x1[1, n] - x0[1, n]) ** 2
+                                  + (x1[2, n] - x0[2, n]) ** 2)
+            k = phi * dt
+            x1[0, n] += k * d0
+            x1[1, n] += k * d1
+            x1[2, n] += k * d2
+            v1[0, n] += d0
+            v1[1, n] += d1
+            v1[2, n] += d2
+            f1[0, n] += fp[0, n] + q * (d1 * b[2] - d2 * b[1])
+            f1[1, n] += fp[1, n] + q * (d2 * b[0] - d0 * b[2])
+            f1[2, n] += fp[2, n] + q * (d0 * b[1] - d1 * b[0])
+            if flag[n] == 0:
+                sums[SUM_ERROR_NUM, j] += math.sqrt(
+                    (x1[0, n] - xk[0, n]) ** 2 + (x1[1, n] - xk[1, n]) ** 2
+                    + (x1[2, n] - xk[2, n]) ** 2) - e_old
+                sums[SUM_ERROR_DEN, j] += math.sqrt(
+                    (x1[0, n] - x0[0, n]) ** 2 + (x1[1, n] - x0[1, n]) ** 2
+                    + (x1[2, n] - x0[2, n]) ** 2) - g_old
 
 
 @njit(cache=True, nogil=True)
@@ -132,6 +188,10 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
             fill_node_fields_threads(phys.field, x0, v0, dt, t1, work.node_field)
         else:
             fill_node_fields(phys.field, x0, v0, dt, t1, work.node_field)
+    # a pack: ply contact's force at the start of the step (the energy bookkeeping's)
+    plied = nodes.ply_nodes.shape[0] > 2
+    if plied:
+        ply_forces(phys, x0, v0, v0, work, work.ply_force0, phi * dt)
     # where the damage law can change α this attempt (materials.damage_thresholds)
     damage_thresholds(sin.alpha, phys.material, phys.yarns.failure_stretch2,
                       work.damage_thr, work.damage_alpha)
@@ -159,9 +219,14 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
         else:
             prev = xbuf if k % 2 == 1 else x1
             cur = x1 if k % 2 == 1 else xbuf
+        if plied:
+            # ply contact at the iterate, with its velocities (the start's at the first)
+            ply_forces(phys, prev, v0 if k == 1 else v1, v0, work, work.ply_force, phi * dt)
         fabric_iterate(phys, prev, sin, StateArrays(cur, v1, f1, alpha_t, b_out, sout.e,
                                                     sout.contact), work,
                        rowbuf, threads, t1, phi, dt)
+        if plied:
+            ply_update(phys, work, cur, v1, f1, prev, x0, t1, phi, dt)
         num_b = 0.0
         den_b = 0.0
         if body.active:
@@ -211,4 +276,13 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
         return CONTACT_MISSED, k, err, nc
     # the electric field in the new state's forces (the energy bookkeeping's field work)
     electric_at_nodes(phys.field, work.node_field, x1, t1, sout.e)
+    if plied:
+        # a pack's nodes in contact with the projectile, per node (contact_nodes_per_ply):
+        # the contact state's flag row, which central differences keep for their placement
+        for n in range(sout.contact.shape[1]):
+            sout.contact[3, n] = 0.0
+        for c in range(nc):
+            sout.contact[3, work.c_node[c]] = 1.0
+            if work.c_node2[c] >= 0:
+                sout.contact[3, work.c_node2[c]] = 1.0
     return CONVERGED, k, err, nc

@@ -785,18 +785,6 @@ class Scenario(_Section):
         return data
 
     @model_validator(mode="after")
-    def _packs_run_explicit(self) -> Scenario:
-        if self.fabric.plies > 1 and self.solver.integrator == "phi":
-            raise ValueError(
-                f"fabric.plies = {self.fabric.plies} with solver.integrator = 'phi': a pack of "
-                "plies runs with central differences only (ply contact is an impulse and a "
-                "placement after each step; inside the φ-scheme's fixed point it breaks the "
-                "iteration, and split from it the energy budget misses tens of J); allowed: "
-                "solver.integrator = 'central-difference' (the default; leave out the "
-                "φ-scheme's keys) or plies = 1")
-        return self
-
-    @model_validator(mode="after")
     def _placement_is_phi_only(self) -> Scenario:
         if (self.solver.integrator == "central-difference"
                 and self.contact.placement != "phi-update"):

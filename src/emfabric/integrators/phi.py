@@ -52,12 +52,7 @@ class Integrator(IntegratorBase):
         THREADS_FROM_NODES nodes when Numba has more than one thread); adaptive: choose
         between it and the serial kernel by timing both (IntegratorBase).
 
-        A pack of plies is refused (its ply contact runs in central differences only; the
-        scenario check says so for scenarios, this for a Model put together in Python)."""
-        if model.ply_count > 1:
-            raise ValueError(
-                f"a pack of {model.ply_count} plies runs with central differences only "
-                "(solver.integrator = 'central-difference'; docs/theory.md §5.1)")
+        A pack of plies meets with the penalty law of plies.ply_forces (docs/theory.md §5.1)."""
         n = model.node_count
         # threads pay off on large sheets only; block size fixed, so results never depend on them
         super().__init__(model, threads=threads if threads is not None else (

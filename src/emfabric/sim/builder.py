@@ -10,6 +10,7 @@ import os
 import numpy as np
 from pydantic import BaseModel
 
+from emfabric._kernels.plies import PLY_STIFFNESS
 from emfabric._kernels.records import (
     BODY_R0,
     BODY_ROWS,
@@ -407,7 +408,7 @@ def _nearest(master: _Ply, x: np.ndarray) -> np.ndarray:
 
 def _ply_contact(plies: list[_Ply]):
     """Contact's ply fields (records.Contact): ply_gap, ply_reach, ply_box, ply_guess,
-    ply_quantum."""
+    ply_quantum, ply_stiffness."""
     gap = np.array([a.thickness + b.thickness for a, b in zip(plies, plies[1:], strict=False)])
     # a node's share of its ply's surface reaches one spacing (the shares are normalised where
     # they are used: no bumps where the lattice is sparse or clipped)
@@ -427,9 +428,19 @@ def _ply_contact(plies: list[_Ply]):
     # impulses up to m·1e5 m/s and placements up to m·(gap + reach) in units of 2^-52 of
     # them: sums of thousands fit an int64
     span = float(gap.max() + reach.max()) if gap.size else 1.0
+    # the φ-scheme's normal stiffness of a node's share: PLY_STIFFNESS × EA/L0 of the softer
+    # ply's yarns (the axial stiffness of one of its segments); forces up to stiffness·span
+    def axial(p):  # the median over the segments that carry load (a rotated ply's grid has
+        k = p.stiffness[p.stiffness > 0.0]  # stiffless segments outside the frame)
+        return float(np.median(k)) if k.size else 0.0
+
+    stiff = PLY_STIFFNESS * np.array([min(axial(a), axial(b))
+                                      for a, b in zip(plies, plies[1:], strict=False)])
+    top = float(stiff.max()) * span if stiff.size and stiff.max() > 0.0 else 1.0
     quantum = np.array([2.0 ** (math.ceil(math.log2(m * 1e5)) - 52),
-                        2.0 ** (math.ceil(math.log2(m * span)) - 52)])
-    return gap, reach, box, guess, quantum
+                        2.0 ** (math.ceil(math.log2(m * span)) - 52),
+                        2.0 ** (math.ceil(math.log2(top)) - 52)])
+    return gap, reach, box, guess, quantum, stiff
 
 
 def non_finite_part(model: Model) -> str | None:
