@@ -247,9 +247,13 @@ def _pass(phys, master, slave, sign, gap, x, v, nrm, acc, guess, shares, box, st
                     acc[1, c, km] -= units
 
 
-PLY_DAMPING = 0.5
-"""The φ-scheme's ply contact: damping ratio of the normal penalty (restitution about 0.16:
-nearly inelastic, as the impulse law of central differences is fully)."""
+PLY_DAMPING = 1.0
+"""The φ-scheme's ply contact: damping ratio of the normal penalty (critical: a pair in contact
+does not rebound, as the impulse law of central differences is inelastic)."""
+PLY_DAMPING_RAMP = 0.05
+"""The damping grows from nothing at first contact to its full value at this overlap, as a
+fraction of the contact distance (continuous: a force that jumps as a pair comes into contact
+is one a fixed point cannot converge across)."""
 PLY_STICK = 0.5
 """The φ-scheme's ply friction: below the Coulomb force μ_d F_n it is viscous, −c_t v_t with
 c_t = PLY_STICK·m_nk/(φΔt): a step removes at most half the pair's relative sliding at its
@@ -282,7 +286,7 @@ def _penalty(share, stiff, gap, g, m_nk, nh, v, v0, n, km, law, phi_dt):
     elastic = stiff * overlap
     # damping grows with the overlap from nothing where contact begins (Hunt–Crossley): a
     # force that jumps as a pair comes into contact is one a fixed point cannot converge across
-    fn = share * max(elastic - c * rn * min(overlap / gap, 1.0), 0.0)
+    fn = share * max(elastic - c * rn * min(overlap / (PLY_DAMPING_RAMP * gap), 1.0), 0.0)
     sx = v0[0, n] - v0[0, km]
     sy = v0[1, n] - v0[1, km]
     sz = v0[2, n] - v0[2, km]
