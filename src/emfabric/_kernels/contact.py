@@ -68,6 +68,55 @@ def contact_impulse(m, v_node, v_surface, n, law, mode):
     return (0.0, 0.0, 0.0), False
 
 
+PLY_DAMPING = 1.0
+"""The φ-scheme's ply contact: damping ratio of the normal penalty (critical: a pair in contact
+does not rebound, as the impulse law of central differences is inelastic)."""
+PLY_DAMPING_RAMP = 0.05
+"""The damping grows from nothing at first contact to its full value at this overlap, as a
+fraction of the contact distance (continuous: a force that jumps as a pair comes into contact
+is one a fixed point cannot converge across)."""
+PLY_STICK = 0.5
+"""The φ-scheme's ply friction: below the Coulomb force μ_d F_n it is viscous, −c_t v_t with
+c_t = PLY_STICK·m_nk/(φΔt): a step removes at most half the pair's relative sliding at its
+start (the friction is taken from the start-of-step velocities: a friction of the iterate's
+would contract the fixed point by a ratio that does not fall with Δt, and the step controller
+would then never let Δt grow back)."""
+
+
+
+@njit(cache=True, inline="always")
+def ply_penalty(share, stiff, gap, g, m_nk, nh, v, v0, n, km, law, phi_dt):
+    """The φ-scheme's ply contact force on node n from node km of the other ply (−it on km;
+    plies.ply_forces): the share of a damped
+    normal penalty, never pulling, F_n = max(k(d − g) − c·v_N·(d − g)/d, 0) with k = stiff,
+    d = gap, c = 2ζ√(k·m_nk) and v_N the relative normal velocity along nh (the damping grows
+    from nothing where contact begins: Hunt–Crossley), and friction −min(μ_d F_n/|v_t|, c_t)·v_t
+    against the relative sliding velocity v_t at the start of the step (v0; Coulomb's, viscous
+    where it would stop the sliding at once: PLY_STICK). The normal part takes the iterate's
+    velocities v. Mirror-exact formulas (sums of squares as ply contact's others)."""
+    rx = v[0, n] - v[0, km]
+    ry = v[1, n] - v[1, km]
+    rz = v[2, n] - v[2, km]
+    rn = (nh[0] * rx + nh[1] * ry) + nh[2] * rz
+    c = 2.0 * PLY_DAMPING * math.sqrt(stiff * m_nk)
+    overlap = gap - g
+    elastic = stiff * overlap
+    # damping grows with the overlap from nothing where contact begins (Hunt–Crossley): a
+    # force that jumps as a pair comes into contact is one a fixed point cannot converge across
+    fn = share * max(elastic - c * rn * min(overlap / (PLY_DAMPING_RAMP * gap), 1.0), 0.0)
+    sx = v0[0, n] - v0[0, km]
+    sy = v0[1, n] - v0[1, km]
+    sz = v0[2, n] - v0[2, km]
+    sn = (nh[0] * sx + nh[1] * sy) + nh[2] * sz
+    tx = sx - sn * nh[0]
+    ty = sy - sn * nh[1]
+    tz = sz - sn * nh[2]
+    vt = math.sqrt((tx * tx + ty * ty) + tz * tz)
+    stick = PLY_STICK * share * m_nk / phi_dt
+    k = min(law.dynamic_friction * fn / vt, stick) if vt > 0.0 else 0.0
+    return fn * nh[0] - k * tx, fn * nh[1] - k * ty, fn * nh[2] - k * tz
+
+
 @njit(cache=True)
 def find_candidates(x, inv_mass, centre, reach, cand, flag):
     """Free nodes within `reach` of the body centre; returns their count."""

@@ -25,7 +25,7 @@ import math
 import numpy as np
 from numba import njit
 
-from emfabric._kernels.contact import contact_impulse
+from emfabric._kernels.contact import contact_impulse, ply_penalty
 from emfabric._kernels.records import ROW_COUNT
 
 
@@ -124,14 +124,13 @@ def _dist2(x, a, b):
 
 
 @njit(cache=True)
-def _pass(phys, master, slave, sign, gap, x, v, nrm, acc, guess, shares, box, stiff, phi_dt,
-          v_start):
+def _pass(phys, master, slave, sign, x, v, nrm, acc, guess, shares, box, penalty):
     """The nodes of ply `slave` against the surface of ply `master` (normals nrm of master's
     nodes, times sign to point towards slave): impulses and placements into acc (integers).
     guess: the reference-nearest master node of each node; shares: scratch, (2, box count):
-    each box node's w and gap; box: master's _region. stiff > 0: the φ-scheme's penalty law
-    instead (ply_forces, φΔt = phi_dt, friction from the velocities v_start): forces into
-    acc[0], nothing into acc[1].
+    each box node's w and gap; box: master's _region; penalty = (stiffness, φΔt, start-of-step
+    velocities): a stiffness > 0 takes the φ-scheme's penalty law instead (ply_forces): forces
+    into acc[0], nothing into acc[1].
 
     A node at its reference height whose reference-nearest master node lies more than
     LEVEL_BOX outside master's region is skipped: every gap there is the plies' reference
@@ -149,7 +148,9 @@ def _pass(phys, master, slave, sign, gap, x, v, nrm, acc, guess, shares, box, st
     bj = law.ply_box[master, 1]
     wide = 2 * bi + 1
     qi, qx, qf = 1.0 / law.ply_quantum[0], 1.0 / law.ply_quantum[1], 1.0 / law.ply_quantum[2]
-    penalty = stiff > 0.0
+    gap = law.ply_gap[min(master, slave)]
+    stiff, phi_dt, v_start = penalty
+    forces = stiff > 0.0
     for n in range(nodes.ply_nodes[slave], nodes.ply_nodes[slave + 1]):
         k = guess[n]
         if k < 0 or mass[n] == 0.0:
@@ -227,9 +228,9 @@ def _pass(phys, master, slave, sign, gap, x, v, nrm, acc, guess, shares, box, st
                 nh = _normal(nrm, km, ci + di, cj + dj, box, sign)
                 share = 0.5 * w / total
                 m_nk = 1.0 / inv_sum
-                if penalty:
-                    fp = _penalty(share, stiff, gap, g, m_nk, nh, v, v_start, n, km, law,
-                                  phi_dt)
+                if forces:
+                    fp = ply_penalty(share, stiff, gap, g, m_nk, nh, v, v_start, n, km, law,
+                                     phi_dt)
                     for c in range(3):
                         units = _units(fp[c], qf)
                         acc[0, c, n] += units
@@ -247,57 +248,10 @@ def _pass(phys, master, slave, sign, gap, x, v, nrm, acc, guess, shares, box, st
                     acc[1, c, km] -= units
 
 
-PLY_DAMPING = 1.0
-"""The φ-scheme's ply contact: damping ratio of the normal penalty (critical: a pair in contact
-does not rebound, as the impulse law of central differences is inelastic)."""
-PLY_DAMPING_RAMP = 0.05
-"""The damping grows from nothing at first contact to its full value at this overlap, as a
-fraction of the contact distance (continuous: a force that jumps as a pair comes into contact
-is one a fixed point cannot converge across)."""
-PLY_STICK = 0.5
-"""The φ-scheme's ply friction: below the Coulomb force μ_d F_n it is viscous, −c_t v_t with
-c_t = PLY_STICK·m_nk/(φΔt): a step removes at most half the pair's relative sliding at its
-start (the friction is taken from the start-of-step velocities: a friction of the iterate's
-would contract the fixed point by a ratio that does not fall with Δt, and the step controller
-would then never let Δt grow back)."""
-
-
 PLY_STIFFNESS = 10.0
 """The φ-scheme's ply contact: its stiffness k_c over the axial stiffness EA/L0 of one segment
 of the softer ply (sim.builder). Ten times: with EA/L0 alone, on the hard impact of
 tests/test_plies.py (400 m/s), a node of the second ply came within the projectile."""
-
-
-@njit(cache=True, inline="always")
-def _penalty(share, stiff, gap, g, m_nk, nh, v, v0, n, km, law, phi_dt):
-    """The φ-scheme's force on node n from master node km (−it on km): the share of a damped
-    normal penalty, never pulling, F_n = max(k(d − g) − c·v_N·(d − g)/d, 0) with k = stiff,
-    d = gap, c = 2ζ√(k·m_nk) and v_N the relative normal velocity along nh (the damping grows
-    from nothing where contact begins: Hunt–Crossley), and friction −min(μ_d F_n/|v_t|, c_t)·v_t
-    against the relative sliding velocity v_t at the start of the step (v0; Coulomb's, viscous
-    where it would stop the sliding at once: PLY_STICK). The normal part takes the iterate's
-    velocities v. Mirror-exact formulas (sums of squares as ply contact's others)."""
-    rx = v[0, n] - v[0, km]
-    ry = v[1, n] - v[1, km]
-    rz = v[2, n] - v[2, km]
-    rn = (nh[0] * rx + nh[1] * ry) + nh[2] * rz
-    c = 2.0 * PLY_DAMPING * math.sqrt(stiff * m_nk)
-    overlap = gap - g
-    elastic = stiff * overlap
-    # damping grows with the overlap from nothing where contact begins (Hunt–Crossley): a
-    # force that jumps as a pair comes into contact is one a fixed point cannot converge across
-    fn = share * max(elastic - c * rn * min(overlap / (PLY_DAMPING_RAMP * gap), 1.0), 0.0)
-    sx = v0[0, n] - v0[0, km]
-    sy = v0[1, n] - v0[1, km]
-    sz = v0[2, n] - v0[2, km]
-    sn = (nh[0] * sx + nh[1] * sy) + nh[2] * sz
-    tx = sx - sn * nh[0]
-    ty = sy - sn * nh[1]
-    tz = sz - sn * nh[2]
-    vt = math.sqrt((tx * tx + ty * ty) + tz * tz)
-    stick = PLY_STICK * share * m_nk / phi_dt
-    k = min(law.dynamic_friction * fn / vt, stick) if vt > 0.0 else 0.0
-    return fn * nh[0] - k * tx, fn * nh[1] - k * ty, fn * nh[2] - k * tz
 
 
 @njit(cache=True)
@@ -305,8 +259,8 @@ def ply_forces(phys, x, v, v_start, work, out, phi_dt):
     """The φ-scheme's ply contact: the force on every node [N] at positions x and velocities v
     into out (3, node_count), summed exactly (integers of Contact.ply_quantum[2]: +F on one node
     of a pair, −F on the other, order-free); the pairs, shares and normals of ply_contact, each
-    pair with the law of _penalty (stiffness Contact.ply_stiffness; phi_dt = φΔt of the step).
-    Returns the number of nodes with a force."""
+    pair with the law of contact.ply_penalty (stiffness Contact.ply_stiffness; phi_dt = φΔt of
+    the step). Returns the number of nodes with a force."""
     nodes, law = phys.nodes, phys.contact
     plies = nodes.ply_nodes.shape[0] - 1
     if plies < 2:
@@ -322,12 +276,11 @@ def ply_forces(phys, x, v, v_start, work, out, phi_dt):
         _region(nodes, p, x, region[p])
         _normals(nodes, p, x, nrm, region[p])
     for p in range(plies - 1):
-        gap = law.ply_gap[p]
-        k = law.ply_stiffness[p]
-        _pass(phys, p, p + 1, -1.0, gap, x, v, nrm, acc, law.ply_guess[0], shares, region[p],
-              k, phi_dt, v_start)
-        _pass(phys, p + 1, p, 1.0, gap, x, v, nrm, acc, law.ply_guess[1], shares,
-              region[p + 1], k, phi_dt, v_start)
+        penalty = (law.ply_stiffness[p], phi_dt, v_start)
+        _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, law.ply_guess[0], shares, region[p],
+              penalty)
+        _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, law.ply_guess[1], shares, region[p + 1],
+              penalty)
     qf = law.ply_quantum[2]
     touched = 0
     for n in range(x.shape[1]):
@@ -392,11 +345,11 @@ def ply_contact(phys, x, v, f, work, lag):
     for p in range(plies):
         _region(nodes, p, x, region[p])
         _normals(nodes, p, x, nrm, region[p])
+    impulses = (0.0, 0.0, v)  # no penalty: the impulse law
     for p in range(plies - 1):
-        gap = law.ply_gap[p]
         # ply p + 1's nodes against ply p's underside, then ply p's nodes against ply p + 1
-        _pass(phys, p, p + 1, -1.0, gap, x, v, nrm, acc, law.ply_guess[0], shares,
-              region[p], 0.0, 0.0, v)
-        _pass(phys, p + 1, p, 1.0, gap, x, v, nrm, acc, law.ply_guess[1], shares,
-              region[p + 1], 0.0, 0.0, v)
+        _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, law.ply_guess[0], shares, region[p],
+              impulses)
+        _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, law.ply_guess[1], shares, region[p + 1],
+              impulses)
     return _apply(nodes, law, x, v, f, acc, lag)
