@@ -255,6 +255,30 @@ tests/test_plies.py (400 m/s), a node of the second ply came within the projecti
 
 
 @njit(cache=True)
+def _all_pairs(phys, x, v, nrm, acc, forces, phi_dt, v_start):
+    """Every ply's region and normals (into nrm), then both passes of every pair of neighbouring
+    plies (ply p + 1's nodes against ply p's underside, then ply p's against ply p + 1) into
+    acc: the φ-scheme's forces (forces True: stiffness Contact.ply_stiffness, φΔt = phi_dt,
+    friction from v_start) or central differences' impulses and placements."""
+    nodes, law = phys.nodes, phys.contact
+    plies = nodes.ply_nodes.shape[0] - 1
+    box = 1
+    for p in range(plies):
+        box = max(box, (2 * law.ply_box[p, 0] + 1) * (2 * law.ply_box[p, 1] + 1))
+    shares = np.empty((2, box))
+    region = np.empty((plies, 4), dtype=np.int64)
+    for p in range(plies):
+        _region(nodes, p, x, region[p])
+        _normals(nodes, p, x, nrm, region[p])
+    for p in range(plies - 1):
+        law_p = (law.ply_stiffness[p] if forces else 0.0, phi_dt, v_start)
+        _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, law.ply_guess[0], shares, region[p],
+              law_p)
+        _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, law.ply_guess[1], shares, region[p + 1],
+              law_p)
+
+
+@njit(cache=True)
 def ply_forces(phys, x, v, v_start, work, out, phi_dt):
     """The φ-scheme's ply contact: the force on every node [N] at positions x and velocities v
     into out (3, node_count), summed exactly (integers of Contact.ply_quantum[2]: +F on one node
@@ -265,22 +289,8 @@ def ply_forces(phys, x, v, v_start, work, out, phi_dt):
     plies = nodes.ply_nodes.shape[0] - 1
     if plies < 2:
         return 0
-    box = 1
-    for p in range(plies):
-        box = max(box, (2 * law.ply_box[p, 0] + 1) * (2 * law.ply_box[p, 1] + 1))
-    shares = np.empty((2, box))
     acc = work.ply_acc
-    nrm = work.ply_normals
-    region = np.empty((plies, 4), dtype=np.int64)
-    for p in range(plies):
-        _region(nodes, p, x, region[p])
-        _normals(nodes, p, x, nrm, region[p])
-    for p in range(plies - 1):
-        penalty = (law.ply_stiffness[p], phi_dt, v_start)
-        _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, law.ply_guess[0], shares, region[p],
-              penalty)
-        _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, law.ply_guess[1], shares, region[p + 1],
-              penalty)
+    _all_pairs(phys, x, v, work.ply_normals, acc, True, phi_dt, v_start)
     qf = law.ply_quantum[2]
     touched = 0
     for n in range(x.shape[1]):
@@ -334,22 +344,7 @@ def ply_contact(phys, x, v, f, work, lag):
     plies = nodes.ply_nodes.shape[0] - 1
     if plies < 2:
         return 0.0, 0.0
-    box = 1
-    for p in range(plies):
-        box = max(box, (2 * law.ply_box[p, 0] + 1) * (2 * law.ply_box[p, 1] + 1))
-    shares = np.empty((2, box))
     acc = work.ply_acc
     # every ply's normals, once (into work.xbuf: free until the projectile's contact)
-    nrm = work.xbuf
-    region = np.empty((plies, 4), dtype=np.int64)
-    for p in range(plies):
-        _region(nodes, p, x, region[p])
-        _normals(nodes, p, x, nrm, region[p])
-    impulses = (0.0, 0.0, v)  # no penalty: the impulse law
-    for p in range(plies - 1):
-        # ply p + 1's nodes against ply p's underside, then ply p's nodes against ply p + 1
-        _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, law.ply_guess[0], shares, region[p],
-              impulses)
-        _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, law.ply_guess[1], shares, region[p + 1],
-              impulses)
+    _all_pairs(phys, x, v, work.xbuf, acc, False, 0.0, v)
     return _apply(nodes, law, x, v, f, acc, lag)
