@@ -300,9 +300,6 @@ def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
     ny = nodes.ny
     w_field = _sum_rows(sums[SUM_WORK_FIELD], ny)
     w_grav = _sum_rows(sums[SUM_WORK_GRAVITY], ny)
-    # plies meet their neighbours at the drifted positions (before the projectile, which has
-    # the last word on the nodes it touches)
-    d_ply, w_ply = ply_contact(phys, sout.x, sout.v, sin.f, work, half)
     for n in range(sout.contact.shape[1]):
         for c in range(4):
             sout.contact[c, n] = 0.0
@@ -376,6 +373,10 @@ def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
             b_out[BODY_W, c] = w1[c]
         if has_electric_field(fld):
             w_field += _body_field_work(phys, b_in, b_out, t, t1)
+    # plies meet their neighbours after the projectile's contact: the nodes it touches are
+    # where it put them, and act in ply contact as of infinite mass (plies.ply_contact)
+    d_ply, w_ply, _sweeps, _worst = ply_contact(phys, sout.x, sout.v, sin.f, work, half,
+                                                 sout.contact[3])
     # the forces at the new positions and time (the one force evaluation of the step), the
     # second half rotation and kick
     if with_sources(fld):

@@ -129,13 +129,16 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, guess, shares, box, penalty
     nodes, times sign to point towards slave): impulses and placements into acc (integers).
     guess: the reference-nearest master node of each node; shares: scratch, (2, box count):
     each box node's w and gap; box: master's _region; penalty = (stiffness, φΔt, start-of-step
-    velocities): a stiffness > 0 takes the φ-scheme's penalty law instead (ply_forces): forces
-    into acc[0], nothing into acc[1].
+    velocities, driven): a stiffness > 0 takes the φ-scheme's penalty law instead
+    (ply_forces): forces into acc[0], nothing into acc[1]; driven (node_count,) or empty:
+    nonzero for the nodes the projectile drives (central differences: ply_contact).
 
     A node at its reference height whose reference-nearest master node lies more than
     LEVEL_BOX outside master's region is skipped: every gap there is the plies' reference
     distance, at least the contact distance (the transverse wave has not come). Only there
-    does ply contact cost less than its full pass."""
+    does ply contact cost less than its full pass.
+
+    Returns the largest overlap (contact distance − gap) [m] of an acting pair (0 if none)."""
     nodes, law = phys.nodes, phys.contact
     inv_mass, mass = nodes.inv_mass, nodes.mass
     m0 = nodes.ply_nodes[master]
@@ -149,8 +152,10 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, guess, shares, box, penalty
     wide = 2 * bi + 1
     qi, qx, qf = 1.0 / law.ply_quantum[0], 1.0 / law.ply_quantum[1], 1.0 / law.ply_quantum[2]
     gap = law.ply_gap[min(master, slave)]
-    stiff, phi_dt, v_start = penalty
+    stiff, phi_dt, v_start, driven = penalty
     forces = stiff > 0.0
+    steered = driven.shape[0] > 0
+    worst = 0.0
     for n in range(nodes.ply_nodes[slave], nodes.ply_nodes[slave + 1]):
         k = guess[n]
         if k < 0 or mass[n] == 0.0:
@@ -236,6 +241,19 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, guess, shares, box, penalty
                         acc[0, c, n] += units
                         acc[0, c, km] -= units
                     continue
+                # a node the projectile drives (in contact with it) acts as one of infinite
+                # mass: the other takes the whole placement and the impulse that brings it to
+                # the driven node's velocity; the driven node takes −J (momentum is exact) and
+                # the projectile's next contact brings it back to the surface's velocity
+                move_n = not (steered and driven[n] != 0.0)
+                move_k = not (steered and driven[km] != 0.0)
+                if not (move_n or move_k):
+                    continue
+                worst = max(worst, gap - g)
+                if not move_n:
+                    m_nk = mass[km]
+                elif not move_k:
+                    m_nk = mass[n]
                 j, _slid = contact_impulse(m_nk, (v[0, n], v[1, n], v[2, n]),
                                            (v[0, km], v[1, km], v[2, km]), nh, law, 0)
                 lift = share * m_nk * (gap - g)
@@ -244,8 +262,11 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, guess, shares, box, penalty
                     acc[0, c, n] += units
                     acc[0, c, km] -= units
                     units = _units(lift * nh[c], qx)
-                    acc[1, c, n] += units
-                    acc[1, c, km] -= units
+                    if move_n:
+                        acc[1, c, n] += units
+                    if move_k:
+                        acc[1, c, km] -= units
+    return worst
 
 
 PLY_STIFFNESS = 10.0
@@ -255,11 +276,11 @@ tests/test_plies.py (400 m/s), a node of the second ply came within the projecti
 
 
 @njit(cache=True)
-def _all_pairs(phys, x, v, nrm, acc, forces, phi_dt, v_start):
+def _all_pairs(phys, x, v, nrm, acc, phi_dt, v_start):
     """Every ply's region and normals (into nrm), then both passes of every pair of neighbouring
     plies (ply p + 1's nodes against ply p's underside, then ply p's against ply p + 1) into
-    acc: the φ-scheme's forces (forces True: stiffness Contact.ply_stiffness, φΔt = phi_dt,
-    friction from v_start) or central differences' impulses and placements."""
+    acc: the φ-scheme's forces (stiffness Contact.ply_stiffness, φΔt = phi_dt, friction from
+    v_start), all from the one state x, v."""
     nodes, law = phys.nodes, phys.contact
     plies = nodes.ply_nodes.shape[0] - 1
     box = 1
@@ -271,7 +292,7 @@ def _all_pairs(phys, x, v, nrm, acc, forces, phi_dt, v_start):
         _region(nodes, p, x, region[p])
         _normals(nodes, p, x, nrm, region[p])
     for p in range(plies - 1):
-        law_p = (law.ply_stiffness[p] if forces else 0.0, phi_dt, v_start)
+        law_p = (law.ply_stiffness[p], phi_dt, v_start, np.empty(0))
         _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, law.ply_guess[0], shares, region[p],
               law_p)
         _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, law.ply_guess[1], shares, region[p + 1],
@@ -290,7 +311,7 @@ def ply_forces(phys, x, v, v_start, work, out, phi_dt):
     if plies < 2:
         return 0
     acc = work.ply_acc
-    _all_pairs(phys, x, v, work.ply_normals, acc, True, phi_dt, v_start)
+    _all_pairs(phys, x, v, work.ply_normals, acc, phi_dt, v_start)
     qf = law.ply_quantum[2]
     touched = 0
     for n in range(x.shape[1]):
@@ -307,16 +328,19 @@ def ply_forces(phys, x, v, v_start, work, out, phi_dt):
 
 
 @njit(cache=True)
-def _apply(nodes, law, x, v, f, acc, lag):
-    """Apply the summed impulses and placements (and clear them). Returns (dissipation [J]:
-    the kinetic energy the impulses took; the work of the force f over the displacement the
-    velocity update does not see, Δx − lag·Δv [J]: the contact placement's term of the energy
-    budget)."""
+def _apply(nodes, law, x, v, f, acc, lag, lo, hi, flag):
+    """Apply the summed impulses and placements of nodes lo..hi − 1 (and clear them). Returns
+    (dissipation [J]: the kinetic energy the impulses took; the work of the force f over the
+    displacement the velocity update does not see, Δx − lag·Δv [J]: the contact placement's
+    term of the energy budget, for the nodes with flag 0 (a projectile contact candidate's is
+    booked by the kick that follows, with the projectile's placement); the largest placement
+    of a node along an axis [m])."""
     qi, qx = law.ply_quantum[0], law.ply_quantum[1]
     inv_mass, mass = nodes.inv_mass, nodes.mass
     lost = 0.0
     work = 0.0
-    for n in range(x.shape[1]):
+    moved = 0.0
+    for n in range(lo, hi):
         if (acc[0, 0, n] == 0 and acc[0, 1, n] == 0 and acc[0, 2, n] == 0
                 and acc[1, 0, n] == 0 and acc[1, 1, n] == 0 and acc[1, 2, n] == 0):
             continue
@@ -325,26 +349,85 @@ def _apply(nodes, law, x, v, f, acc, lag):
             dv = float(acc[0, c, n]) * qi * im
             dx = float(acc[1, c, n]) * qx * im
             lost -= mass[n] * (v[c, n] * dv + 0.5 * dv * dv)
-            work += f[c, n] * (dx - lag * dv)
+            if flag[n] == 0:
+                work += f[c, n] * (dx - lag * dv)
+            moved = max(moved, abs(dx))
             v[c, n] += dv
             x[c, n] += dx
             acc[0, c, n] = 0
             acc[1, c, n] = 0
-    return lost, work
+    return lost, work, moved
+
+
+PLY_SWEEPS = 8
+"""Central differences' ply contact: the most sweeps over the pack's pairs in one step."""
+PLY_TOLERANCE = 1e-3
+"""Central differences' ply contact sweeps until no node is placed by more than this fraction of
+the contact distance (Contact.ply_gap) along any axis in a sweep. (Not until no pair overlaps:
+a node under a sharp fold of the ply above meets tangent planes that no placement satisfies at
+once, and its overlap with the tilted ones, up to ≈ d(1 − cos θ), stays while the placements
+that balance it are tiny.)"""
 
 
 @njit(cache=True)
-def ply_contact(phys, x, v, f, work, lag):
+def ply_contact(phys, x, v, f, work, lag, driven):
     """Ply-to-ply contact of every pair of neighbouring plies at positions x and velocities v
-    (changed in place); work.xbuf holds the plies' normals afterwards; f: the node forces whose
-    work the placement does, lag: the time over which the scheme's position update sees a
-    velocity change (energy bookkeeping: Δt/2 for central differences). Returns (dissipation
-    [J], placement work [J]); (0, 0) for one ply."""
+    (changed in place); work.ply_normals holds the plies' normals afterwards; f: the node
+    forces whose work the placement does, lag: the time over which the scheme's position
+    update sees a velocity change (energy bookkeeping: Δt/2 for central differences); driven:
+    nonzero for the nodes in contact with the projectile (State.contact[3] after its
+    contact).
+    Returns (dissipation [J], placement work [J], sweeps, the largest overlap the last sweep
+    met [m]); (0, 0, 0, 0) for one ply.
+
+    Gauss–Seidel over the pairs: each pair's impulses and placements are applied before the
+    next pair is met, downwards through the pack (pair 1–2 first) and upwards on the next
+    sweep, until a sweep places no node by more than PLY_TOLERANCE of the contact distance (at
+    most PLY_SWEEPS sweeps). A node the projectile drives acts as one of infinite mass
+    (_pass): the projectile put it on its surface, and the pack below is placed against it.
+    One simultaneous (Jacobi) pass per step with shared placements, before the projectile's
+    contact, let the upper plies of an 8-ply pack under an FSP's flat face close their gaps
+    (docs/theory.md §5.1). The order is fixed, so the numbers are the same for any thread
+    count, and every pair keeps exact action and reaction."""
     nodes, law = phys.nodes, phys.contact
     plies = nodes.ply_nodes.shape[0] - 1
     if plies < 2:
-        return 0.0, 0.0
+        return 0.0, 0.0, 0, 0.0
     acc = work.ply_acc
-    # every ply's normals, once (into work.xbuf: free until the projectile's contact)
-    _all_pairs(phys, x, v, work.xbuf, acc, False, 0.0, v)
-    return _apply(nodes, law, x, v, f, acc, lag)
+    nrm = work.ply_normals
+    box = 1
+    tol = law.ply_gap[0]
+    for p in range(plies):
+        box = max(box, (2 * law.ply_box[p, 0] + 1) * (2 * law.ply_box[p, 1] + 1))
+    for p in range(plies - 1):
+        tol = min(tol, law.ply_gap[p])
+    tol *= PLY_TOLERANCE
+    shares = np.empty((2, box))
+    region = np.empty((2, 4), dtype=np.int64)
+    lost = 0.0
+    placed = 0.0
+    sweeps = 0
+    worst = 0.0
+    for sweep in range(PLY_SWEEPS):
+        sweeps += 1
+        worst = 0.0
+        moved = 0.0
+        for q in range(plies - 1):
+            p = q if sweep % 2 == 0 else plies - 2 - q
+            for s in range(2):
+                _region(nodes, p + s, x, region[s])
+                _normals(nodes, p + s, x, nrm, region[s])
+            law_p = (0.0, 0.0, v, driven)
+            worst = max(worst, _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, law.ply_guess[0],
+                                     shares, region[0], law_p))
+            worst = max(worst, _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, law.ply_guess[1],
+                                     shares, region[1], law_p))
+            d_lost, d_placed, d_moved = _apply(nodes, law, x, v, f, acc, lag,
+                                               nodes.ply_nodes[p], nodes.ply_nodes[p + 2],
+                                               work.flag)
+            lost += d_lost
+            placed += d_placed
+            moved = max(moved, d_moved)
+        if moved <= tol:
+            break
+    return lost, placed, sweeps, worst

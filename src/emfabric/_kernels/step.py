@@ -82,27 +82,35 @@ def fabric_iterate(phys, prev, sin, sout, work, rowbuf, threads, t1, phi, dt):
 
 @njit(cache=True)
 def ply_update(phys, work, x1, v1, f1, xk, x0, t1, phi, dt):
-    """Add the ply contact force work.ply_force (plies.ply_forces at the iterate xk) to the
-    φ-update of the nodes it acts on: the update is linear in the force, so its share is
-    Δv = M(u)·(φΔt/m) F (M the closed-form inverse of the magnetic part, u = φΔt q B/m with the
-    B the node update used), Δx = φΔt Δv, Δf = F + q Δv × B; the rows' error sums follow the
-    moved nodes (contact candidates' are computed later, from the final positions)."""
+    """Add ply contact to the φ-update of the nodes it acts on: the force at the iterate xk
+    (work.ply_force, plies.ply_forces) weighted φ and the force at the start of the step
+    (work.ply_force0, from x0 and v0) weighted 1 − φ. The update is linear in the force, so
+    its share is Δv = M(u)·(Δt/m)(φF₁ + (1−φ)F₀) (M the closed-form inverse of the magnetic
+    part, u = φΔt q B/m with the B the node update used), Δx = φΔt Δv, Δf = q Δv × B: the
+    node force f carried to the next step holds no ply force (the next step recomputes it at
+    its start, so the update and the energy bookkeeping use the same F₀); the rows' error
+    sums follow the moved nodes (contact candidates' are computed later, from the final
+    positions)."""
     nodes, fld = phys.nodes, phys.field
-    fp = work.ply_force
+    fp, fp0 = work.ply_force, work.ply_force0
     sums = work.row_sums
     flag = work.flag
     inv_mass, charge = nodes.inv_mass, nodes.charge
     for j in range(nodes.rows.shape[0]):
         nb = nodes.rows[j, ROW_NODE]
         for n in range(nb, nb + nodes.rows[j, ROW_COUNT]):
-            if (fp[0, n] == 0.0 and fp[1, n] == 0.0 and fp[2, n] == 0.0) or inv_mass[n] == 0.0:
+            if ((fp[0, n] == 0.0 and fp[1, n] == 0.0 and fp[2, n] == 0.0
+                 and fp0[0, n] == 0.0 and fp0[1, n] == 0.0 and fp0[2, n] == 0.0)
+                    or inv_mass[n] == 0.0):
                 continue
             q = charge[n]
             _e, b = node_field(fld, work.node_field, n, (xk[0, n], xk[1, n], xk[2, n]), t1)
-            h = phi * dt * inv_mass[n]
-            s = h * q
+            h = dt * inv_mass[n]
+            s = phi * h * q
             u0, u1, u2 = s * b[0], s * b[1], s * b[2]
-            a0, a1, a2 = h * fp[0, n], h * fp[1, n], h * fp[2, n]
+            a0 = h * (phi * fp[0, n] + (1.0 - phi) * fp0[0, n])
+            a1 = h * (phi * fp[1, n] + (1.0 - phi) * fp0[1, n])
+            a2 = h * (phi * fp[2, n] + (1.0 - phi) * fp0[2, n])
             au = (a0 * u0 + a1 * u1) + a2 * u2
             inv = 1.0 / (1.0 + ((u0 * u0 + u1 * u1) + u2 * u2))
             d0 = ((a0 + (a1 * u2 - a2 * u1)) + au * u0) * inv
@@ -120,9 +128,9 @@ def ply_update(phys, work, x1, v1, f1, xk, x0, t1, phi, dt):
             v1[0, n] += d0
             v1[1, n] += d1
             v1[2, n] += d2
-            f1[0, n] += fp[0, n] + q * (d1 * b[2] - d2 * b[1])
-            f1[1, n] += fp[1, n] + q * (d2 * b[0] - d0 * b[2])
-            f1[2, n] += fp[2, n] + q * (d0 * b[1] - d1 * b[0])
+            f1[0, n] += q * (d1 * b[2] - d2 * b[1])
+            f1[1, n] += q * (d2 * b[0] - d0 * b[2])
+            f1[2, n] += q * (d0 * b[1] - d1 * b[0])
             if flag[n] == 0:
                 sums[SUM_ERROR_NUM, j] += math.sqrt(
                     (x1[0, n] - xk[0, n]) ** 2 + (x1[1, n] - xk[1, n]) ** 2
