@@ -375,8 +375,7 @@ def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
             w_field += _body_field_work(phys, b_in, b_out, t, t1)
     # plies meet their neighbours after the projectile's contact: the nodes it touches are
     # where it put them, and act in ply contact as of infinite mass (plies.ply_contact)
-    d_ply, w_ply, _sweeps, _worst = ply_contact(phys, sout.x, sout.v, sin.f, work, half,
-                                                 sout.contact[3])
+    d_ply, w_ply = ply_contact(phys, sout.x, sout.v, sin.f, work, half, sout.contact[3])
     # the forces at the new positions and time (the one force evaluation of the step), the
     # second half rotation and kick
     if with_sources(fld):

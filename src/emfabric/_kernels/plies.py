@@ -136,9 +136,7 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, guess, shares, box, penalty
     A node at its reference height whose reference-nearest master node lies more than
     LEVEL_BOX outside master's region is skipped: every gap there is the plies' reference
     distance, at least the contact distance (the transverse wave has not come). Only there
-    does ply contact cost less than its full pass.
-
-    Returns the largest overlap (contact distance − gap) [m] of an acting pair (0 if none)."""
+    does ply contact cost less than its full pass."""
     nodes, law = phys.nodes, phys.contact
     inv_mass, mass = nodes.inv_mass, nodes.mass
     m0 = nodes.ply_nodes[master]
@@ -155,7 +153,6 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, guess, shares, box, penalty
     stiff, phi_dt, v_start, driven = penalty
     forces = stiff > 0.0
     steered = driven.shape[0] > 0
-    worst = 0.0
     for n in range(nodes.ply_nodes[slave], nodes.ply_nodes[slave + 1]):
         k = guess[n]
         if k < 0 or mass[n] == 0.0:
@@ -249,7 +246,6 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, guess, shares, box, penalty
                 move_k = not (steered and driven[km] != 0.0)
                 if not (move_n or move_k):
                     continue
-                worst = max(worst, gap - g)
                 if not move_n:
                     m_nk = mass[km]
                 elif not move_k:
@@ -266,13 +262,22 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, guess, shares, box, penalty
                         acc[1, c, n] += units
                     if move_k:
                         acc[1, c, km] -= units
-    return worst
 
 
 PLY_STIFFNESS = 10.0
 """The φ-scheme's ply contact: its stiffness k_c over the axial stiffness EA/L0 of one segment
 of the softer ply (sim.builder). Ten times: with EA/L0 alone, on the hard impact of
 tests/test_plies.py (400 m/s), a node of the second ply came within the projectile."""
+
+
+@njit(cache=True)
+def _shares_buffer(law, plies):
+    """_pass's scratch for the shares and gaps of a node's box of master nodes: (2, the
+    largest box of any ply)."""
+    box = 1
+    for p in range(plies):
+        box = max(box, (2 * law.ply_box[p, 0] + 1) * (2 * law.ply_box[p, 1] + 1))
+    return np.empty((2, box))
 
 
 @njit(cache=True)
@@ -283,10 +288,7 @@ def _all_pairs(phys, x, v, nrm, acc, phi_dt, v_start):
     v_start), all from the one state x, v."""
     nodes, law = phys.nodes, phys.contact
     plies = nodes.ply_nodes.shape[0] - 1
-    box = 1
-    for p in range(plies):
-        box = max(box, (2 * law.ply_box[p, 0] + 1) * (2 * law.ply_box[p, 1] + 1))
-    shares = np.empty((2, box))
+    shares = _shares_buffer(law, plies)
     region = np.empty((plies, 4), dtype=np.int64)
     for p in range(plies):
         _region(nodes, p, x, region[p])
@@ -381,8 +383,7 @@ def ply_contact(phys, x, v, f, work, lag, driven):
     update sees a velocity change (energy bookkeeping: Δt/2 for central differences); driven:
     nonzero for the nodes in contact with the projectile (State.contact[3] after its
     contact).
-    Returns (dissipation [J], placement work [J], sweeps, the largest overlap the last sweep
-    met [m]); (0, 0, 0, 0) for one ply.
+    Returns (dissipation [J], placement work [J]); (0, 0) for one ply.
 
     Gauss–Seidel over the pairs: each pair's impulses and placements are applied before the
     next pair is met, downwards through the pack (pair 1–2 first) and upwards on the next
@@ -398,28 +399,18 @@ def ply_contact(phys, x, v, f, work, lag, driven):
     nodes, law = phys.nodes, phys.contact
     plies = nodes.ply_nodes.shape[0] - 1
     if plies < 2:
-        return 0.0, 0.0, 0, 0.0
+        return 0.0, 0.0
     acc = work.ply_acc
     nrm = work.ply_normals
-    box = 1
-    tol = law.ply_gap[0]
-    for p in range(plies):
-        box = max(box, (2 * law.ply_box[p, 0] + 1) * (2 * law.ply_box[p, 1] + 1))
-    for p in range(plies - 1):
-        tol = min(tol, law.ply_gap[p])
-    tol *= PLY_TOLERANCE
-    shares = np.empty((2, box))
+    tol = PLY_TOLERANCE * law.ply_gap.min()
+    shares = _shares_buffer(law, plies)
     region = np.empty((2, 4), dtype=np.int64)
     lost = 0.0
     placed = 0.0
-    sweeps = 0
-    worst = 0.0
     # the largest placement of each pair when it was last met: a pair whose own and whose
     # neighbours' last placements were all within the tolerance is not met again
     busy = np.full(plies - 1, math.inf)
     for sweep in range(PLY_SWEEPS):
-        sweeps += 1
-        worst = 0.0
         moved = 0.0
         for q in range(plies - 1):
             p = q if sweep % 2 == 0 else plies - 2 - q
@@ -430,10 +421,10 @@ def ply_contact(phys, x, v, f, work, lag, driven):
                 _region(nodes, p + s, x, region[s])
                 _normals(nodes, p + s, x, nrm, region[s])
             law_p = (0.0, 0.0, v, driven)
-            worst = max(worst, _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, law.ply_guess[0],
-                                     shares, region[0], law_p))
-            worst = max(worst, _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, law.ply_guess[1],
-                                     shares, region[1], law_p))
+            _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, law.ply_guess[0], shares, region[0],
+                  law_p)
+            _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, law.ply_guess[1], shares, region[1],
+                  law_p)
             d_lost, d_placed, d_moved = _apply(nodes, law, x, v, f, acc, lag,
                                                nodes.ply_nodes[p], nodes.ply_nodes[p + 2],
                                                work.flag)
@@ -443,4 +434,4 @@ def ply_contact(phys, x, v, f, work, lag, driven):
             busy[p] = d_moved
         if moved <= tol:
             break
-    return lost, placed, sweeps, worst
+    return lost, placed
