@@ -108,6 +108,41 @@ def test_sighup_keeps_a_readable_partial_history(tmp_path):
     assert not (out / ".emfabric.lock").exists()  # the folder is free again
 
 
+def test_a_signal_during_a_checkpoint_write_lets_the_write_finish(tmp_path, monkeypatch):
+    """A signal that arrives while a checkpoint is written stops the run only after the write:
+    its KeyboardInterrupt, raised inside xarray's netCDF lock (not reentrant), once left the
+    lock taken, and closing the file waited on it for ever (a run given SIGHUP as it wrote a
+    checkpoint never exited). Here the signal comes from inside the second write."""
+    from emfabric.io import checkpoint
+    from emfabric.runner import loop as runner
+
+    writes = []
+    real = checkpoint.write_checkpoint
+
+    def write(*args, **kwargs):
+        if len(writes) == 1:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.05)  # the handler runs at the next bytecode: here, if not held
+        real(*args, **kwargs)
+        writes.append(True)
+
+    monkeypatch.setattr(runner, "write_checkpoint", write)
+    old = signal.signal(signal.SIGINT, runner.interrupt)
+    try:
+        sc = load_scenario("demo-small", {"solver.end_time": 1e-3,
+                                          "projectile.velocity": [0, 0, 0],
+                                          "output.checkpoint_seconds": 1e-6})
+        with pytest.raises(KeyboardInterrupt) as caught:
+            run(sc, tmp_path / "sig")
+    finally:
+        signal.signal(signal.SIGINT, old)
+    assert len(writes) >= 3  # the interrupted write finished, and the final one ran
+    assert caught.value.result.status == "partial"
+    ds = xr.open_dataset(tmp_path / "sig" / "history.nc")
+    assert ds.attrs["status"] == "partial"
+    assert xr.open_dataset(tmp_path / "sig" / "checkpoint.nc").sizes
+
+
 def test_a_signal_whose_exception_python_dropped_still_stops_the_run(tmp_path):
     """Python drops an exception raised while it runs a weakref callback or __del__: the
     handler's flag alone must stop the run at the next step, files kept, marked partial."""

@@ -172,7 +172,7 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
         recorder = Recorder(plies=model.ply_count)
         snaps = Snapshots(model, out, paraview=_paraview(model))
         measure(model, s_in, recorder.new_row())
-        with _snapshot_naming(out):
+        with _signals_deferred(stop=True), _snapshot_naming(out):
             snaps.take(s_in)
         next_snap = interval
         wall_before = 0.0
@@ -229,7 +229,8 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
         if resumed is None:
             # the initial record on disk before the step kernel compiles (seconds on a cold
             # cache): a run killed meanwhile still leaves a readable history
-            save("partial", RUNNING)
+            with _signals_deferred(stop=True):
+                save("partial", RUNNING)
         while s_in.t < t_end * (1 - 1e-12):
             if _STOP.is_set():
                 raise KeyboardInterrupt
@@ -248,7 +249,8 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
                 if deferred:
                     integ.start_background_compile(s_in, s_out)
             if s_in.t >= next_snap * (1 - 1e-12):
-                with _snapshot_naming(out):  # the .vtu files are written as it is taken
+                # the .vtu files are written as it is taken
+                with _signals_deferred(stop=True), _snapshot_naming(out):
                     snaps.take(s_in)
                 next_snap = interval * (math.floor(s_in.t / interval + 1e-9) + 1)
             if progress is not None:
@@ -258,7 +260,8 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
                 reason = left
                 break
             if out is not None and time.perf_counter() > next_checkpoint:
-                save("partial", RUNNING)
+                with _signals_deferred(stop=True):
+                    save("partial", RUNNING)
                 next_checkpoint = time.perf_counter() + options.checkpoint_seconds
     except KeyboardInterrupt as exc:
         status, reason, error = "partial", f"interrupted at t = {s_in.t:.6g} s", exc
@@ -272,7 +275,7 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
     regular = snaps.count
     if snaps.times[-1] != s_in.t:
         try:
-            with _snapshot_naming(out):
+            with _signals_deferred(), _snapshot_naming(out):
                 snaps.take(s_in)
         except OutputError as exc:
             if error is None:
@@ -402,9 +405,13 @@ def _free_space(path: Path) -> str:
 
 
 @contextlib.contextmanager
-def _signals_deferred():
-    """Hold SIGINT, SIGTERM and SIGHUP while the final files are written (main thread only);
-    a signal that arrives meanwhile is re-raised as KeyboardInterrupt afterwards."""
+def _signals_deferred(stop: bool = False):
+    """Hold SIGINT, SIGTERM and SIGHUP while files are written (main thread only). The
+    handler's KeyboardInterrupt must not land inside a write: raised while xarray held its
+    netCDF lock (a plain, not reentrant lock) it left the lock taken, and closing the file then
+    waited on it for ever (a run given SIGHUP as it wrote a checkpoint never exited).
+    stop: a signal that arrived meanwhile stops the run at its next step (_STOP), as the
+    handler would have; else (the final files) it is only logged."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -420,4 +427,7 @@ def _signals_deferred():
         for sig, handler in old.items():
             signal.signal(sig, handler)
     if caught:
-        log.info("signal received while writing the files: they are complete")
+        if stop:
+            _STOP.set()
+        else:
+            log.info("signal received while writing the files: they are complete")
