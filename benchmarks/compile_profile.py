@@ -9,6 +9,7 @@ compiled first). NUMBA_NUM_THREADS=1 shows the serial path alone.
 
 from __future__ import annotations
 
+import argparse
 import os
 import subprocess
 import sys
@@ -54,6 +55,8 @@ def main() -> None:
     if "--child" in sys.argv:
         child()
         return
+    # --help says what this does instead of running it (a minute or more)
+    argparse.ArgumentParser(description=__doc__.splitlines()[0]).parse_args()
     with tempfile.TemporaryDirectory() as cache:
         env = dict(os.environ, NUMBA_CACHE_DIR=cache, EMFABRIC_BENCH_LAUNCH=repr(time.time()))
         subprocess.run([sys.executable, __file__, "--child"], env=env, check=True)

@@ -247,12 +247,14 @@ def _body_field_work(phys, b0, b1, t0, t1):
 
 
 @njit(cache=True, nogil=True)
-def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
+def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol, energy):
     """One central-difference step from sin (at t) to sout (at t + Δt): nodes, body, contact,
     damage committed, the energy terms of the step added to energy (6,). sin is never written.
     Exactly one of rowbuf (ROWBUF_ROWS, nx + 1: the serial force kernel) and threads (blocks,
     ROWBUF_ROWS, nx + 1: the threaded one) is an array, the other None (only the kernel in use
-    is compiled); both give the same numbers.
+    is compiled); both give the same numbers. plies, segs: an array where the model is a pack
+    (ply contact) or its projectile meets segments (phys.contact.segments), else None: Numba
+    then leaves that code out of the compiled kernel.
 
     Returns (status, contacts, stable): stable the explicit stability limit at the new state
     (stable_step's Gershgorin bound, from the force evaluation's tangent stiffnesses) [s];
@@ -280,7 +282,7 @@ def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
         speed = norm(b_in[BODY_V]) + radius * norm(b_in[BODY_W])
         reach = 1.05 * radius + 2.0 * dt * (speed + math.sqrt(vmax))
         ncand = find_candidates(sin.x, inv_mass, b_in[BODY_X], reach, work.cand, flag)
-        if phys.contact.segments:
+        if segs is not None:
             ncand, nseg = find_segment_candidates(phys.yarns, sin.alpha,
                                                   phys.material.broken_below, sin.x,
                                                   inv_mass, b_in[BODY_X], reach, work, ncand)
@@ -337,7 +339,7 @@ def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
             for c in range(3):
                 work.xbuf[c, n] = sout.x[c, n]
         nc = _node_contact(phys, sin, sout, work, ncand)
-        if phys.contact.segments:
+        if segs is not None:
             nc = segment_contact(nodes, phys.yarns, body, phys.contact, b_out, nseg, nc,
                                  sout.x, sout.v, work)
         reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, reaction[0], reaction[1])
@@ -375,7 +377,10 @@ def central_step(phys, sin, sout, work, rowbuf, threads, t, dt, tol, energy):
             w_field += _body_field_work(phys, b_in, b_out, t, t1)
     # plies meet their neighbours after the projectile's contact: the nodes it touches are
     # where it put them, and act in ply contact as of infinite mass (plies.ply_contact)
-    d_ply, w_ply = ply_contact(phys, sout.x, sout.v, sin.f, work, half, sout.contact[3])
+    d_ply = 0.0
+    w_ply = 0.0
+    if plies is not None:
+        d_ply, w_ply = ply_contact(phys, sout.x, sout.v, sin.f, work, half, sout.contact[3])
     # the forces at the new positions and time (the one force evaluation of the step), the
     # second half rotation and kick
     if with_sources(fld):

@@ -141,12 +141,14 @@ def ply_update(phys, work, x1, v1, f1, xk, x0, t1, phi, dt):
 
 
 @njit(cache=True, nogil=True)
-def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
+def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, plies, segs, t, dt, accel):
     """Iterate the coupled step from time t to t + Δt to ϖ_K ≤ solver.tolerance within
     solver.iteration_limit iterations (phys: a Physics record, sin/sout: StateArrays).
 
     Returns (status, K, ϖ_K, contact count). On CONVERGED, sout holds the state at t + Δt and
-    sout.alpha the trial damage to commit; sin is never written.
+    sout.alpha the trial damage to commit; sin is never written. plies, segs: an array where the
+    model is a pack (ply contact) or its projectile meets segments (phys.contact.segments),
+    else None: Numba then leaves that code out of the compiled kernel.
     """
     nodes = phys.nodes
     body = phys.body
@@ -175,7 +177,7 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
         speed = norm(b_in[BODY_V]) + radius * norm(b_in[BODY_W])
         reach = 1.05 * radius + 2.0 * dt * (speed + math.sqrt(vmax))
         ncand = find_candidates(x0, inv_mass, b_in[BODY_X], reach, work.cand, flag)
-        if phys.contact.segments:
+        if segs is not None:
             ncand, nseg = find_segment_candidates(phys.yarns, sin.alpha,
                                                   phys.material.broken_below, x0, inv_mass,
                                                   b_in[BODY_X], reach, work, ncand)
@@ -197,8 +199,7 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
         else:
             fill_node_fields(phys.field, x0, v0, dt, t1, work.node_field)
     # a pack: ply contact's force at the start of the step (the energy bookkeeping's)
-    plied = nodes.ply_nodes.shape[0] > 2
-    if plied:
+    if plies is not None:
         ply_forces(phys, x0, v0, v0, work, work.ply_force0, phi * dt)
     # where the damage law can change α this attempt (materials.damage_thresholds)
     damage_thresholds(sin.alpha, phys.material, phys.yarns.failure_stretch2,
@@ -227,20 +228,20 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
         else:
             prev = xbuf if k % 2 == 1 else x1
             cur = x1 if k % 2 == 1 else xbuf
-        if plied:
+        if plies is not None:
             # ply contact at the iterate, with its velocities (the start's at the first)
             ply_forces(phys, prev, v0 if k == 1 else v1, v0, work, work.ply_force, phi * dt)
         fabric_iterate(phys, prev, sin, StateArrays(cur, v1, f1, alpha_t, b_out, sout.e,
                                                     sout.contact), work,
                        rowbuf, threads, t1, phi, dt)
-        if plied:
+        if plies is not None:
             ply_update(phys, work, cur, v1, f1, prev, x0, t1, phi, dt)
         num_b = 0.0
         den_b = 0.0
         if body.active:
             nc = node_contact(nodes, body, phys.contact, b_out, ncand, cur, v1, work,
                               phi if phys.contact.follow else 0.0, dt, k > FREEZE_AFTER)
-            if phys.contact.segments:
+            if segs is not None:
                 nc = segment_contact(nodes, phys.yarns, body, phys.contact, b_out, nseg, nc,
                                      cur, v1, work)
             candidate_errors(nodes, ncand, work.cand, x0, prev, cur, row_sums)
@@ -284,7 +285,7 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, t, dt, accel):
         return CONTACT_MISSED, k, err, nc
     # the electric field in the new state's forces (the energy bookkeeping's field work)
     electric_at_nodes(phys.field, work.node_field, x1, t1, sout.e)
-    if plied:
+    if plies is not None:
         # a pack's nodes in contact with the projectile, per node (contact_nodes_per_ply):
         # the contact state's flag row, which central differences keep for their placement
         for n in range(sout.contact.shape[1]):

@@ -57,6 +57,10 @@ PROBE_FIRST = 3 * PROBE_STEPS
 """The first probe comes after this many steps (then every PROBE_EVERY)."""
 
 
+_SWITCH_ON = np.zeros(1)
+"""The array that switches a part of the step kernels on (IntegratorBase.switches)."""
+
+
 class IntegratorBase(ABC):
     """One time-integration scheme for one Model: ``step(s_in, s_out, dt_limit=…)`` advances
     s_in by one accepted step into s_out (s_in is never written) and returns a StepInfo; a
@@ -93,6 +97,13 @@ class IntegratorBase(ABC):
         """The serial kernel's row buffer (None until it is used)."""
         self.threads: np.ndarray | None = None
         """The threaded kernel's row buffers, one per row block (None until it is used)."""
+        self.switches: tuple[np.ndarray | None, np.ndarray | None] = (
+            _SWITCH_ON if model.ply_count > 1 else None,
+            _SWITCH_ON if model.physics.contact.segments else None)
+        """(plies, segments) for the step kernels: an array where a pack's ply contact, or the
+        projectile's contact with segments, is used; None where not, so that Numba leaves that
+        code out of the compiled kernel (a single sheet's step kernel does not compile ply
+        contact: seconds off a cold start). Each combination is its own compiled kernel."""
         self._use_threads(threads)
 
     @abstractmethod
@@ -101,7 +112,12 @@ class IntegratorBase(ABC):
 
     def variant(self, threaded: bool | None = None) -> str:
         """Name of the compiled step kernels this integrator runs (or would run threaded)."""
-        return self.name
+        return self.name + self.switch_suffix()
+
+    def switch_suffix(self) -> str:
+        """The part of a variant's name that says which switches (self.switches) are on."""
+        plies, segs = self.switches
+        return ("-plies" if plies is not None else "") + ("-segments" if segs is not None else "")
 
     def _compile_target(self, s_in: State, s_out: State, threads: np.ndarray):
         """(dispatcher, arguments) of the threaded step kernel, for its background compile

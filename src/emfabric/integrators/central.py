@@ -67,11 +67,12 @@ class CentralDifference(IntegratorBase):
 
     def variant(self, threaded: bool | None = None) -> str:
         threaded = self.threaded if threaded is None else threaded
-        return f"central-difference-{'threads' if threaded else 'serial'}"
+        return (f"central-difference-{'threads' if threaded else 'serial'}"
+                + self.switch_suffix())
 
     def _compile_target(self, s_in: State, s_out: State, threads: np.ndarray):
         return central_step, (self.physics, s_in.arrays, s_out.arrays, self.work, None, threads,
-                              s_in.t, 1e-9, ROTATION_TOLERANCE, s_out.energy)
+                              *self.switches, s_in.t, 1e-9, ROTATION_TOLERANCE, s_out.energy)
 
     def stable_dt(self, state: State, crit: float | None = None) -> float:
         """The step central differences take from this state [s] (before dt_limit); crit: the
@@ -99,7 +100,7 @@ class CentralDifference(IntegratorBase):
         while True:
             status, nc, crit = self._step(self.threaded, self.physics, s_in.arrays,
                                           s_out.arrays, self.work, *self.kernel_buffers,
-                                          s_in.t, dt, ROTATION_TOLERANCE, s_out.energy)
+                                          *self.switches, s_in.t, dt, ROTATION_TOLERANCE, s_out.energy)
             if status == OK:
                 break
             if status == NOT_FINITE:

@@ -85,14 +85,15 @@ class Integrator(IntegratorBase):
         """Name of the compiled step kernel this integrator runs (or would run threaded)."""
         threaded = self.threaded if threaded is None else threaded
         return (f"{'threads' if threaded else 'serial'}-"
-                f"{'anderson' if self.accel is not None else 'fixed-point'}")
+                f"{'anderson' if self.accel is not None else 'fixed-point'}"
+                + self.switch_suffix())
 
     def _compile_target(self, s_in: State, s_out: State, threads: np.ndarray):
         return attempt_step, self._args(s_in, s_out, 0.0, None, threads)
 
     def _args(self, s_in: State, s_out: State, dt: float, rowbuf, threads) -> tuple:
         return (self.physics, self.solver, s_in.arrays, s_out.arrays, self.work, rowbuf, threads,
-                s_in.t, dt, self.accel)
+                *self.switches, s_in.t, dt, self.accel)
 
     def step(self, s_in: State, s_out: State, *, dt_limit: float = math.inf) -> StepInfo:
         """Advance s_in by one accepted step into s_out; s_in is left untouched."""
