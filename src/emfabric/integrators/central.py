@@ -100,7 +100,8 @@ class CentralDifference(IntegratorBase):
         while True:
             status, nc, crit = self._step(self.threaded, self.physics, s_in.arrays,
                                           s_out.arrays, self.work, *self.kernel_buffers,
-                                          *self.switches, s_in.t, dt, ROTATION_TOLERANCE, s_out.energy)
+                                          *self.switches, s_in.t, dt, ROTATION_TOLERANCE,
+                                          s_out.energy)
             if status == OK:
                 break
             if status == NOT_FINITE:
