@@ -402,6 +402,28 @@ def node_field(fld, nf, n, x, t):
     return field_at(fld, x, t)
 
 
+@njit(cache=True, inline="always")
+def uniform_field(fld):
+    """((E, B, region, z0), sourced): the uniform part of the Field record as plain numbers and
+    whether it has sources (a constant of the record's type). What node_field_of needs, with no
+    array in it: an inlined per-row function that is given the record itself references and
+    releases each of its arrays (atomic operations) on every call (nodes._rotate_row)."""
+    e, b = fld.E, fld.B
+    return ((e[0], e[1], e[2]), (b[0], b[1], b[2]), fld.region, fld.z0), with_sources(fld)
+
+
+@njit(cache=True, inline="always")
+def node_field_of(uni, sourced, nf, n, x):
+    """node_field from uniform_field's numbers: the same values (a field without sources is
+    uniform or a half-space, field_at's w·E, w·B; a field with sources is what
+    fill_node_fields stored)."""
+    if sourced:
+        return (nf[0, n], nf[1, n], nf[2, n]), (nf[3, n], nf[4, n], nf[5, n])
+    e, b, region, z0 = uni
+    w = 1.0 if (region != REGION_HALF_SPACE or x[2] < z0) else 0.0
+    return (w * e[0], w * e[1], w * e[2]), (w * b[0], w * b[1], w * b[2])
+
+
 @njit(cache=True)
 def fields_at_points(fld, points, t, e, b):
     """e, b (N, 3) = field_at at each of the points (N, 3) [m] and time t [s]."""

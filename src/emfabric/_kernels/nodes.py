@@ -22,7 +22,7 @@ import math
 
 from numba import njit, prange
 
-from emfabric._kernels.fields import magnetic_force, node_field
+from emfabric._kernels.fields import magnetic_force, node_field_of, uniform_field
 from emfabric._kernels.materials import damage_above, stress_factor, stretch_sq, tangent_factor
 from emfabric._kernels.records import (
     ROW_COUNT,
@@ -181,7 +181,8 @@ def _block_start(j0, phys, prev, sin, sout, work, buf, mode):
 
 
 @njit(cache=True, inline="always")
-def _row_force(j, nodes, yarns, mat, fld, prev, sin, sout, work, t1, buf, tu, td, mode):
+def _row_force(j, rows, mass, charge, inv_rest2, coef, mat, uni, sourced, grav, prev, alpha_c,
+               alpha_t, damage_thr, node_fields, buf, tu, td, mode):
     """The non-magnetic force of grid row j at the positions `prev` and time t1 into the row
     buffer's ROW_FORCE rows: yarn tensions (the warp segments of row j and the fill segments to
     row j + 1, into tu; td holds those from row j − 1), one difference per node and direction,
@@ -189,19 +190,16 @@ def _row_force(j, nodes, yarns, mat, fld, prev, sin, sout, work, t1, buf, tu, td
     mode & TANGENT the segments' tangent stiffness into row 3 of the warp row, tu and td.
 
     The one force evaluation of both schemes: the φ-update (_row_block) and central
-    differences (_kick_block) call it row by row, inlined, with the records taken out of the
-    Physics record once per block (_rotate_row says why)."""
-    node_fields = work.node_field
-    alpha_c, alpha_t, damage_thr = sin.alpha, sout.alpha, work.damage_thr
-    mass, charge = nodes.mass, nodes.charge
-    coef = yarns.stiffness
-    grav = fld.gravity
+    differences (_kick_block) call it row by row, inlined, given arrays and numbers rather than
+    records (_rotate_row says why): the nodes' rows, mass and charge; the segments' 1/L0²,
+    stiffness, committed and trial α and damage thresholds; the material; the field as
+    fields.uniform_field gives it, gravity as a tuple, the node fields."""
     # the row's nodes and first segments (records.Nodes.rows); rest lengths are uniform per
     # yarn family within a ply
-    nb = nodes.rows[j, ROW_NODE]
-    nx = nodes.rows[j, ROW_COUNT]
-    sb = nodes.rows[j, ROW_WARP]
-    sf = nodes.rows[j, ROW_FILL]
+    nb = rows[j, ROW_NODE]
+    nx = rows[j, ROW_COUNT]
+    sb = rows[j, ROW_WARP]
+    sf = rows[j, ROW_FILL]
     xx, xy, xz = prev[0], prev[1], prev[2]
     # padded warp row: twp[:, i + 1] is the tension of segment (i, i + 1), zeros at both ends
     twp = buf[ROW_WARP_TENSION:ROW_WARP_TENSION + 4]
@@ -209,13 +207,13 @@ def _row_force(j, nodes, yarns, mat, fld, prev, sin, sout, work, t1, buf, tu, td
     f = buf[ROW_FORCE:ROW_FORCE + 3]
     e = nb + nx
     _tensions((xx[nb:e - 1], xy[nb:e - 1], xz[nb:e - 1]), (xx[nb + 1:e], xy[nb + 1:e],
-              xz[nb + 1:e]), nx - 1, yarns.inv_rest2[sb],
+              xz[nb + 1:e]), nx - 1, inv_rest2[sb],
               (alpha_c[sb:sb + nx - 1], alpha_t[sb:sb + nx - 1],
                damage_thr[sb:sb + nx - 1], coef[sb:sb + nx - 1]), mat, buf, twp[:, 1:],
               mode | ALPHA)
     if sf >= 0:
         _tensions((xx[nb:e], xy[nb:e], xz[nb:e]), (xx[e:e + nx], xy[e:e + nx],
-                  xz[e:e + nx]), nx, yarns.inv_rest2[sf],
+                  xz[e:e + nx]), nx, inv_rest2[sf],
                   (alpha_c[sf:sf + nx], alpha_t[sf:sf + nx],
                    damage_thr[sf:sf + nx], coef[sf:sf + nx]), mat, buf, tu,
                   mode | ALPHA)
@@ -229,7 +227,7 @@ def _row_force(j, nodes, yarns, mat, fld, prev, sin, sout, work, t1, buf, tu, td
     # fields: field_at in each loop that needs it (a compare and a select, cheaper than a
     # row of stores and loads: the stored variant made an evaluation ~7 % slower); a field
     # with sources: the value fields.fill_node_fields stored for this attempt (at the
-    # predicted position). fields.node_field, chosen at compile time by the field's type
+    # predicted position). fields.node_field_of, chosen at compile time by the field's type
     px, py, pz = xx[nb:e], xy[nb:e], xz[nb:e]
     for c in range(3):
         fc = f[c]
@@ -240,7 +238,7 @@ def _row_force(j, nodes, yarns, mat, fld, prev, sin, sout, work, t1, buf, tu, td
         # yarn force, one difference per node and direction (mirror-exact assembly),
         # then the electric part of eq. 2.7 and gravity
         for i in range(nx):
-            fe, _fb = node_field(fld, node_fields, nb + i, (px[i], py[i], pz[i]), t1)
+            fe, _fb = node_field_of(uni, sourced, node_fields, nb + i, (px[i], py[i], pz[i]))
             fc[i] = ((tw[i + 1] - tw[i]) + (tuc[i] - tdc[i])) + (m[i] * g + q[i] * fe[c])
 
 
@@ -249,6 +247,8 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
     """Rows j0 ≤ j < j1 of the fused φ iterate: the force of each row (_row_force), consumed at
     once by the φ-update of its nodes (eqs. 3.2, A12–A13) and the error terms of eq. 3.10."""
     nodes, yarns, mat, fld = phys.nodes, phys.yarns, phys.material, phys.field
+    uni, sourced = uniform_field(fld)
+    grav = (fld.gravity[0], fld.gravity[1], fld.gravity[2])
     node_fields = work.node_field
     x0, v0, f0 = sin.x, sin.v, sin.f
     x1, v1, f1 = sout.x, sout.v, sout.f
@@ -264,7 +264,9 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
     inv = buf[ROW_INV_DENOM]
     dt_over_m = buf[ROW_DT_OVER_MASS]
     for j in range(j0, j1):
-        _row_force(j, nodes, yarns, mat, fld, prev, sin, sout, work, t1, buf, tu, td, 0)
+        _row_force(j, nodes.rows, nodes.mass, nodes.charge, yarns.inv_rest2, yarns.stiffness,
+                   mat, uni, sourced, grav, prev, sin.alpha, sout.alpha, work.damage_thr,
+                   node_fields, buf, tu, td, 0)
         nb = nodes.rows[j, ROW_NODE]
         nx = nodes.rows[j, ROW_COUNT]
         e = nb + nx
@@ -284,7 +286,7 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
         ux, uy, uz = uu[0], uu[1], uu[2]
         ax, ay, az = acc[0], acc[1], acc[2]
         for i in range(nx):
-            _fe, fb = node_field(fld, node_fields, nb + i, (px[i], py[i], pz[i]), t1)
+            _fe, fb = node_field_of(uni, sourced, node_fields, nb + i, (px[i], py[i], pz[i]))
             beta = phi * dt_over_m[i] * q[i]
             ux[i] = beta * fb[0]
             uy[i] = beta * fb[1]
@@ -300,7 +302,7 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
         fx, fy, fz = f[0], f[1], f[2]
         gx, gy, gz = f1[0, nb:e], f1[1, nb:e], f1[2, nb:e]
         for i in range(nx):
-            _fe, fb = node_field(fld, node_fields, nb + i, (px[i], py[i], pz[i]), t1)
+            _fe, fb = node_field_of(uni, sourced, node_fields, nb + i, (px[i], py[i], pz[i]))
             fm = magnetic_force(q[i], (vx[i], vy[i], vz[i]), fb)
             gx[i] = fx[i] + fm[0]
             gy[i] = fy[i] + fm[1]
@@ -401,9 +403,10 @@ def tan_ratio(y2):
 
 
 @njit(cache=True, inline="always")
-def _rotate_row(nb, count, nodes, fld, nf, pos, t, tau, v, buf):
+def _rotate_row(nb, count, inv_mass, charge, uni, sourced, nf, pos, tau, v, buf):
     """Turn the velocities v (a tuple of three row views of `count` nodes from node nb) by the
-    magnetic force alone for a time tau: dv/dt = (q/m) v × B(pos, t), B constant over tau.
+    magnetic force alone for a time tau: dv/dt = (q/m) v × B(pos), B constant over tau (the
+    field as fields.uniform_field gives it, or the node fields nf of a field with sources).
 
     Boris's rotation v' = v + v × t, v ← v + v' × 2t/(1 + |t|²) with t = tan(θ/2) B̂·sign(q)
     turns by exactly θ = |q B/m| tau (the standard t = q B tau/(2m) turns by 2 atan(θ/2)): the
@@ -412,19 +415,20 @@ def _rotate_row(nb, count, nodes, fld, nf, pos, t, tau, v, buf):
     vectorised), else each node by Rodrigues's formula (rodrigues: any angle). Clamped
     nodes (1/m = 0) and uncharged ones are left exactly as they are.
 
-    Inlined (Numba IR), as _row_force, and given the records the block took out of the Physics
-    record: a compiled call references every array of its record arguments on entry and
-    releases it on exit (an atomic increment and decrement each; `perf` put 21 % of a
-    central-difference step in them), and a call per row paid that for ~30 arrays; inlined,
-    paper-no-field runs 7 % and paper-field 10 % faster, to the same bits."""
-    im = nodes.inv_mass[nb:nb + count]
-    q = nodes.charge[nb:nb + count]
+    Inlined (Numba IR), as _row_force, and given arrays and numbers, not records: Numba
+    references every array of a record bound to a function's argument on entry and releases
+    it on exit (an atomic increment and decrement each). Called per row with the Physics
+    record, and then inlined with its sub-records, that was ~60 arrays a row and 21 % of a
+    central-difference step (`perf`); now a few.
+    """
+    im = inv_mass[nb:nb + count]
+    q = charge[nb:nb + count]
     px, py, pz = pos
     vx, vy, vz = v
     tx, ty, tz = buf[ROW_ROTATION], buf[ROW_ROTATION + 1], buf[ROW_ROTATION + 2]
     y2 = buf[ROW_PROJECTION]
     for i in range(count):
-        _e, b = node_field(fld, nf, nb + i, (px[i], py[i], pz[i]), t)
+        _e, b = node_field_of(uni, sourced, nf, nb + i, (px[i], py[i], pz[i]))
         s = 0.5 * tau * q[i] * im[i]
         tx[i] = s * b[0]
         ty[i] = s * b[1]
@@ -456,7 +460,7 @@ def _rotate_row(nb, count, nodes, fld, nf, pos, t, tau, v, buf):
     for i in range(count):
         if y2[i] == 0.0:
             continue
-        _e, b = node_field(fld, nf, nb + i, (px[i], py[i], pz[i]), t)
+        _e, b = node_field_of(uni, sourced, nf, nb + i, (px[i], py[i], pz[i]))
         r = rodrigues((vx[i], vy[i], vz[i]), q[i] * im[i], b, tau)
         vx[i] = r[0]
         vy[i] = r[1]
@@ -505,9 +509,10 @@ def _drift_block(j0, j1, phys, sin, sout, work, t0, dt, buf):
     x_{n+1} = x_n + h v_{n+½} (a clamped node stays), into sout.v and sout.x; each row's field
     and gravity work of the half kick (h/2 f·v̄) into work.row_sums."""
     nodes, fld = phys.nodes, phys.field
+    uni, sourced = uniform_field(fld)
     nf = work.node_field
     sums = work.row_sums
-    grav = fld.gravity
+    grav = (fld.gravity[0], fld.gravity[1], fld.gravity[2])
     half = 0.5 * dt
     vm = buf[ROW_VEL_EXPLICIT:ROW_VEL_EXPLICIT + 3]
     wfield, wgrav = buf[ROW_INV_DENOM], buf[ROW_DT_OVER_MASS]
@@ -525,7 +530,7 @@ def _drift_block(j0, j1, phys, sin, sout, work, t0, dt, buf):
         wx, wy, wz = vm[0], vm[1], vm[2]
         for i in range(nx):
             # the State's force is the whole ψ(t) (as the φ-scheme's): without q v × B
-            _e, b = node_field(fld, nf, nb + i, (px[i], py[i], pz[i]), t0)
+            _e, b = node_field_of(uni, sourced, nf, nb + i, (px[i], py[i], pz[i]))
             fm = magnetic_force(q[i], (ux[i], uy[i], uz[i]), b)
             k = half * im[i]
             wx[i] = ux[i] + k * (fx[i] - fm[0])
@@ -539,7 +544,8 @@ def _drift_block(j0, j1, phys, sin, sout, work, t0, dt, buf):
             wgrav[i] = half * m[i] * ((grav[0] * bx + grav[1] * by) + grav[2] * bz)
         sums[SUM_WORK_FIELD, j] = _row_total(wfield, nx)
         sums[SUM_WORK_GRAVITY, j] = _row_total(wgrav, nx)
-        _rotate_row(nb, nx, nodes, fld, nf, (px, py, pz), t0, half, (wx, wy, wz), buf)
+        _rotate_row(nb, nx, nodes.inv_mass, nodes.charge, uni, sourced, nf, (px, py, pz), half,
+                    (wx, wy, wz), buf)
         for c in range(3):
             x0c = sin.x[c, nb:e]
             x1c = sout.x[c, nb:e]
@@ -560,10 +566,11 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
     term of the contact candidates (explicit.central_step), Σ|v_{n+1}|² and the largest
     2 Σ k_t/m of its nodes (the Gershgorin bound of ω² of explicit.stable_step)."""
     nodes, yarns, mat, fld = phys.nodes, phys.yarns, phys.material, phys.field
+    uni, sourced = uniform_field(fld)
     nf = work.node_field
     sums = work.row_sums
     flag, xbuf, v_pre = work.flag, work.xbuf, work.v_pre
-    grav = fld.gravity
+    grav = (fld.gravity[0], fld.gravity[1], fld.gravity[2])
     half = 0.5 * dt
     x1, v1 = sout.x, sout.v
     tu, td = _block_start(j0, phys, x1, sin, sout, work, buf, TANGENT)
@@ -571,7 +578,9 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
     kw = buf[ROW_WARP_TENSION + 3]
     wfield, wgrav, speed2 = buf[ROW_INV_DENOM], buf[ROW_DT_OVER_MASS], buf[ROW_VEL_EXPLICIT]
     for j in range(j0, j1):
-        _row_force(j, nodes, yarns, mat, fld, x1, sin, sout, work, t1, buf, tu, td, TANGENT)
+        _row_force(j, nodes.rows, nodes.mass, nodes.charge, yarns.inv_rest2, yarns.stiffness,
+                   mat, uni, sourced, grav, x1, sin.alpha, sout.alpha, work.damage_thr, nf, buf,
+                   tu, td, TANGENT)
         nb = nodes.rows[j, ROW_NODE]
         nx = nodes.rows[j, ROW_COUNT]
         e = nb + nx
@@ -594,12 +603,13 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
         sums[SUM_PROJECTION, j] = proj
         px, py, pz = x1[0, nb:e], x1[1, nb:e], x1[2, nb:e]
         vx, vy, vz = v1[0, nb:e], v1[1, nb:e], v1[2, nb:e]
-        _rotate_row(nb, nx, nodes, fld, nf, (px, py, pz), t1, half, (vx, vy, vz), buf)
+        _rotate_row(nb, nx, nodes.inv_mass, nodes.charge, uni, sourced, nf, (px, py, pz), half,
+                    (vx, vy, vz), buf)
         fx, fy, fz = f[0], f[1], f[2]
         gx, gy, gz = sout.f[0, nb:e], sout.f[1, nb:e], sout.f[2, nb:e]
         ex, ey, ez = sout.e[0, nb:e], sout.e[1, nb:e], sout.e[2, nb:e]
         for i in range(nx):
-            ee, b = node_field(fld, nf, nb + i, (px[i], py[i], pz[i]), t1)
+            ee, b = node_field_of(uni, sourced, nf, nb + i, (px[i], py[i], pz[i]))
             k = half * im[i]
             nvx = vx[i] + k * fx[i]
             nvy = vy[i] + k * fy[i]
