@@ -36,6 +36,7 @@ from emfabric._kernels.records import (
     SUM_STIFFNESS,
     SUM_WORK_FIELD,
     SUM_WORK_GRAVITY,
+    RowArrays,
     RowRecords,
 )
 
@@ -181,8 +182,7 @@ def _block_start(j0, phys, prev, sin, sout, work, buf, mode):
 
 
 @njit(cache=True, inline="always")
-def _row_force(j, rows, mass, charge, inv_rest2, coef, mat, uni, sourced, grav, prev, alpha_c,
-               alpha_t, damage_thr, node_fields, buf, tu, td, mode):
+def _row_force(j, arr, mat, uni, sourced, grav, prev, buf, tu, td, mode):
     """The non-magnetic force of grid row j at the positions `prev` and time t1 into the row
     buffer's ROW_FORCE rows: yarn tensions (the warp segments of row j and the fill segments to
     row j + 1, into tu; td holds those from row j − 1), one difference per node and direction,
@@ -191,9 +191,9 @@ def _row_force(j, rows, mass, charge, inv_rest2, coef, mat, uni, sourced, grav, 
 
     The one force evaluation of both schemes: the φ-update (_row_block) and central
     differences (_kick_block) call it row by row, inlined, given arrays and numbers rather than
-    records (_rotate_row says why): the nodes' rows, mass and charge; the segments' 1/L0²,
-    stiffness, committed and trial α and damage thresholds; the material; the field as
-    fields.uniform_field gives it, gravity as a tuple, the node fields."""
+    Physics's records (_rotate_row says why): arr a records.RowArrays built once per block, the
+    material, the field as fields.uniform_field gives it, gravity as a tuple."""
+    rows, mass, charge, inv_rest2, coef, alpha_c, alpha_t, damage_thr, node_fields = arr
     # the row's nodes and first segments (records.Nodes.rows); rest lengths are uniform per
     # yarn family within a ply
     nb = rows[j, ROW_NODE]
@@ -250,6 +250,8 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
     uni, sourced = uniform_field(fld)
     grav = (fld.gravity[0], fld.gravity[1], fld.gravity[2])
     node_fields = work.node_field
+    arr = RowArrays(nodes.rows, nodes.mass, nodes.charge, yarns.inv_rest2, yarns.stiffness,
+                    sin.alpha, sout.alpha, work.damage_thr, node_fields)
     x0, v0, f0 = sin.x, sin.v, sin.f
     x1, v1, f1 = sout.x, sout.v, sout.f
     skip_err = work.flag
@@ -264,9 +266,7 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
     inv = buf[ROW_INV_DENOM]
     dt_over_m = buf[ROW_DT_OVER_MASS]
     for j in range(j0, j1):
-        _row_force(j, nodes.rows, nodes.mass, nodes.charge, yarns.inv_rest2, yarns.stiffness,
-                   mat, uni, sourced, grav, prev, sin.alpha, sout.alpha, work.damage_thr,
-                   node_fields, buf, tu, td, 0)
+        _row_force(j, arr, mat, uni, sourced, grav, prev, buf, tu, td, 0)
         nb = nodes.rows[j, ROW_NODE]
         nx = nodes.rows[j, ROW_COUNT]
         e = nb + nx
@@ -568,6 +568,8 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
     nodes, yarns, mat, fld = phys.nodes, phys.yarns, phys.material, phys.field
     uni, sourced = uniform_field(fld)
     nf = work.node_field
+    arr = RowArrays(nodes.rows, nodes.mass, nodes.charge, yarns.inv_rest2, yarns.stiffness,
+                    sin.alpha, sout.alpha, work.damage_thr, nf)
     sums = work.row_sums
     flag, xbuf, v_pre = work.flag, work.xbuf, work.v_pre
     grav = (fld.gravity[0], fld.gravity[1], fld.gravity[2])
@@ -578,9 +580,7 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
     kw = buf[ROW_WARP_TENSION + 3]
     wfield, wgrav, speed2 = buf[ROW_INV_DENOM], buf[ROW_DT_OVER_MASS], buf[ROW_VEL_EXPLICIT]
     for j in range(j0, j1):
-        _row_force(j, nodes.rows, nodes.mass, nodes.charge, yarns.inv_rest2, yarns.stiffness,
-                   mat, uni, sourced, grav, x1, sin.alpha, sout.alpha, work.damage_thr, nf, buf,
-                   tu, td, TANGENT)
+        _row_force(j, arr, mat, uni, sourced, grav, x1, buf, tu, td, TANGENT)
         nb = nodes.rows[j, ROW_NODE]
         nx = nodes.rows[j, ROW_COUNT]
         e = nb + nx

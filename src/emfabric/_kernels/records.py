@@ -339,6 +339,28 @@ class RowRecords(NamedTuple):
     field: Field
 
 
+class RowArrays(NamedTuple):
+    """The arrays the per-row force (nodes._row_force) reads, built once per row block: a
+    function bound to a record references and releases every array in it (atomic operations),
+    so the per-row code gets these nine and not Physics's records (nodes._rotate_row)."""
+
+    rows: np.ndarray
+    """Nodes.rows."""
+    mass: np.ndarray
+    charge: np.ndarray
+    inv_rest2: np.ndarray
+    """Yarns.inv_rest2."""
+    stiffness: np.ndarray
+    alpha: np.ndarray
+    """The committed α (the step's start state)."""
+    alpha_trial: np.ndarray
+    """The trial α written by the evaluation."""
+    damage_thr: np.ndarray
+    """Work.damage_thr."""
+    node_field: np.ndarray
+    """Work.node_field."""
+
+
 class Physics(NamedTuple):
     """Everything a kernel reads about the model, by name."""
 
