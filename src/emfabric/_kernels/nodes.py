@@ -183,10 +183,11 @@ def _block_start(j0, phys, prev, sin, sout, work, buf, mode):
 
 @njit(cache=True, inline="always")
 def _row_force(j, arr, mat, uni, sourced, grav, prev, buf, tu, td, mode):
-    """The non-magnetic force of grid row j at the positions `prev` and time t1 into the row
-    buffer's ROW_FORCE rows: yarn tensions (the warp segments of row j and the fill segments to
-    row j + 1, into tu; td holds those from row j − 1), one difference per node and direction,
-    plus the electric part of eq. 2.7 and gravity. Trial damage into sout.alpha; with
+    """The non-magnetic force of grid row j at the positions `prev` (and the step's end time:
+    the field is uniform, or the node fields stored for it) into the row buffer's ROW_FORCE
+    rows: yarn tensions (the warp segments of row j and the fill segments to row j + 1, into
+    tu; td holds those from row j − 1), one difference per node and direction, plus the
+    electric part of eq. 2.7 and gravity. Trial damage into arr.alpha_trial; with
     mode & TANGENT the segments' tangent stiffness into row 3 of the warp row, tu and td.
 
     The one force evaluation of both schemes: the φ-update (_row_block) and central
