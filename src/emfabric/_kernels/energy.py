@@ -94,7 +94,7 @@ def step_energy(phys, sin, sout, nc, work, t0, phi, dt, out):
     for idx in range(work.counts[0]):
         n = cand[idx]
         # the B the node update used (the attempt's stored field for sources)
-        _e1, b1 = node_field(fld, work.node_field, n, (x1[0, n], x1[1, n], x1[2, n]), t1)
+        _e1, b1 = node_field(fld, work.node_field, n, (x1[0, n], x1[1, n], x1[2, n]))
         fm = magnetic_force(charge[n], (work.v_pre[0, n], work.v_pre[1, n], work.v_pre[2, n]),
                             b1)
         for c in range(3):

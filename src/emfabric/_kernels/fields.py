@@ -368,11 +368,11 @@ def fill_node_fields(fld, x, v, dt, t, out):
 
 
 @njit(cache=True)
-def electric_at_nodes(fld, nf, x, t, out):
-    """out (3, N) = the electric field the node update used at the nodes x at t: the stored
-    field of the attempt for sources (nf), field_at for the uniform field."""
+def electric_at_nodes(fld, nf, x, out):
+    """out (3, N) = the electric field the node update used at the nodes x: the stored field of
+    the attempt for sources (nf, at its time), field_at's for the uniform field."""
     for n in range(x.shape[1]):
-        e, _b = node_field(fld, nf, n, (x[0, n], x[1, n], x[2, n]), t)
+        e, _b = node_field(fld, nf, n, (x[0, n], x[1, n], x[2, n]))
         out[0, n] = e[0]
         out[1, n] = e[1]
         out[2, n] = e[2]
@@ -391,15 +391,6 @@ def fill_node_fields_threads(fld, x, v, dt, t, out):
         a = c * FIELD_CHUNK
         b = min(n, a + FIELD_CHUNK)
         fill_fields(fld.grid_values, fld, x[:, a:b], v[:, a:b], dt, t, out[:, a:b])
-
-
-@njit(cache=True, inline="always")
-def node_field(fld, nf, n, x, t):
-    """(E, B) at node n, at its iterate x: field_at itself for the uniform field (a compare and
-    a select: cheaper than a store and a load), what fill_node_fields stored otherwise."""
-    if with_sources(fld):
-        return (nf[0, n], nf[1, n], nf[2, n]), (nf[3, n], nf[4, n], nf[5, n])
-    return field_at(fld, x, t)
 
 
 @njit(cache=True, inline="always")
@@ -422,6 +413,16 @@ def node_field_of(uni, sourced, nf, n, x):
     e, b, region, z0 = uni
     w = 1.0 if (region != REGION_HALF_SPACE or x[2] < z0) else 0.0
     return (w * e[0], w * e[1], w * e[2]), (w * b[0], w * b[1], w * b[2])
+
+
+@njit(cache=True, inline="always")
+def node_field(fld, nf, n, x):
+    """(E, B) at node n, at its iterate x, from the Field record: field_at's values for a field
+    without sources (a compare and a select: cheaper than a store and a load), what
+    fill_node_fields stored otherwise (node_field_of; per-row code calls that directly).
+    """
+    uni, sourced = uniform_field(fld)
+    return node_field_of(uni, sourced, nf, n, x)
 
 
 @njit(cache=True)

@@ -81,7 +81,7 @@ def fabric_iterate(phys, prev, sin, sout, work, rowbuf, threads, t1, phi, dt):
 
 
 @njit(cache=True)
-def ply_update(phys, work, x1, v1, f1, xk, x0, t1, phi, dt):
+def ply_update(phys, work, x1, v1, f1, xk, x0, phi, dt):
     """Add ply contact to the φ-update of the nodes it acts on: the force at the iterate xk
     (work.ply_force, plies.ply_forces) weighted φ and the force at the start of the step
     (work.ply_force0, from x0 and v0) weighted 1 − φ. The update is linear in the force, so
@@ -104,7 +104,7 @@ def ply_update(phys, work, x1, v1, f1, xk, x0, t1, phi, dt):
                     or inv_mass[n] == 0.0):
                 continue
             q = charge[n]
-            _e, b = node_field(fld, work.node_field, n, (xk[0, n], xk[1, n], xk[2, n]), t1)
+            _e, b = node_field(fld, work.node_field, n, (xk[0, n], xk[1, n], xk[2, n]))
             h = dt * inv_mass[n]
             s = phi * h * q
             u0, u1, u2 = s * b[0], s * b[1], s * b[2]
@@ -235,7 +235,7 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, plies, segs, t,
                                                     sout.contact), work,
                        rowbuf, threads, t1, phi, dt)
         if plies is not None:
-            ply_update(phys, work, cur, v1, f1, prev, x0, t1, phi, dt)
+            ply_update(phys, work, cur, v1, f1, prev, x0, phi, dt)
         num_b = 0.0
         den_b = 0.0
         if body.active:
@@ -284,7 +284,7 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, plies, segs, t,
     if body.active and nodes_inside(x1, inv_mass, flag, body, b_out) > 0:
         return CONTACT_MISSED, k, err, nc
     # the electric field in the new state's forces (the energy bookkeeping's field work)
-    electric_at_nodes(phys.field, work.node_field, x1, t1, sout.e)
+    electric_at_nodes(phys.field, work.node_field, x1, sout.e)
     if plies is not None:
         # a pack's nodes in contact with the projectile, per node (contact_nodes_per_ply):
         # the contact state's flag row, which central differences keep for their placement
