@@ -269,3 +269,49 @@ def test_step_below_dt_min_stops_with_a_clear_error():
     sc = load_scenario("demo-small", {"solver.dt_min": 5e-7, "solver.end_time": 2e-6, **CD})
     with pytest.raises(DivergenceError, match="below solver.dt_min"):
         run(sc)
+
+
+@pytest.mark.parametrize("threads", [False, True])
+def test_history_diagnostics_from_the_kick_equal_a_separate_pass(threads):
+    """The step kernel's kick leaves the fabric diagnostics of the end state (kinetic energy,
+    momenta, strain energy, stretch, broken yarns, extent...) and the next step's
+    no-tunnelling limit on its way; they equal diagnostics.fabric_diagnostics and
+    contact.travel_step computed afresh on that state: the maxima, minima and counts exactly,
+    the sums to round-off (summed per grid row, then over rows). A 2-ply pack struck hard
+    enough to break yarns (brittle KM2), with a field."""
+    from emfabric._kernels.contact import travel_step
+    from emfabric._kernels.diagnostics import (
+        AHEAD_MAX, AHEAD_MIN, APPROACH_MAX, BROKEN, COUNT, DEFLECTION, KE, LX, MIN_ALPHA, PX,
+        RECEDE_MAX, STRAIN, STRETCH, fabric_diagnostics)
+    from emfabric._kernels.explicit import _travel_from_rows
+
+    sc = load_scenario("pack-fsp", {"fabric.plies": 2, "fabric.nodes": [21, 21],
+                                    "projectile.velocity": [0.0, 0.0, -1500.0], **CD})
+    model = build_model(sc)
+    integ = CentralDifference(model, threads=threads)
+    s, s2 = initial_state(model), initial_state(model)
+    ref = np.empty(COUNT)
+    broke = 0.0
+    while s.steps < 200:
+        integ.step(s, s2)
+        s, s2 = s2, s
+        got = integ.fabric_of(s)
+        assert got is not None and integ.fabric_of(s2) is None
+        fabric_diagnostics(model.physics, s.node_x, s.node_v, s.seg_alpha, s.body_x,
+                           model.flight_direction, ref)
+        for k in (DEFLECTION, STRETCH, BROKEN, MIN_ALPHA, AHEAD_MIN, AHEAD_MAX, APPROACH_MAX,
+                  RECEDE_MAX):
+            assert got[k] == ref[k], k
+        m = model.nodes.mass
+        speed = np.linalg.norm(s.node_v, axis=0)
+        assert got[KE] == pytest.approx(ref[KE], rel=1e-12, abs=1e-300)
+        assert got[STRAIN] == pytest.approx(ref[STRAIN], rel=1e-12, abs=1e-300)
+        np.testing.assert_allclose(got[PX:PX + 3], ref[PX:PX + 3], rtol=0,
+                                   atol=1e-13 * float(m @ speed))
+        arm = np.linalg.norm(s.node_x, axis=0)
+        np.testing.assert_allclose(got[LX:LX + 3], ref[LX:LX + 3], rtol=0,
+                                   atol=1e-13 * float(m @ (arm * speed)))
+        assert _travel_from_rows(model.physics, integ.work.row_sums, model.ny, s.body) == \
+            travel_step(model.physics, s.node_x, s.node_v, s.body)
+        broke = max(broke, ref[BROKEN])
+    assert broke > 0, "no yarn broke: the test does not test the broken-yarn terms"

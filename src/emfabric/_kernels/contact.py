@@ -505,8 +505,6 @@ def travel_step(phys, x, v, b_state):
     """The no-tunnelling limit [s]: the body moves at most CONTACT_TRAVEL of its radius relative
     to any node in one step, and in a pack no two nodes move relative to each other by more
     than PLY_TRAVEL of the plies' contact distance (inf without a body, plies or motion)."""
-    body = phys.body
-    gaps = phys.contact.ply_gap
     vmax = 0.0
     lo = (math.inf, math.inf, math.inf)
     hi = (-math.inf, -math.inf, -math.inf)
@@ -514,6 +512,15 @@ def travel_step(phys, x, v, b_state):
         vmax = max(vmax, v[0, n] ** 2 + v[1, n] ** 2 + v[2, n] ** 2)
         lo = (min(lo[0], v[0, n]), min(lo[1], v[1, n]), min(lo[2], v[2, n]))
         hi = (max(hi[0], v[0, n]), max(hi[1], v[1, n]), max(hi[2], v[2, n]))
+    return travel_limit(phys, vmax, lo, hi, b_state)
+
+
+@njit(cache=True)
+def travel_limit(phys, vmax, lo, hi, b_state):
+    """travel_step from the nodes' largest |v|² (vmax), and the smallest and largest of each
+    velocity component (lo, hi; tuples)."""
+    body = phys.body
+    gaps = phys.contact.ply_gap
     limit = math.inf
     if gaps.shape[0] > 0:
         # the largest relative speed of two nodes is at most the spread of each component

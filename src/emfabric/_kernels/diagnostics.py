@@ -39,6 +39,23 @@ from emfabric._kernels.records import (
     COL_TIME,
     COL_VELOCITY,
     COL_YAW,
+    DIAG_AHEAD_MAX,
+    DIAG_AHEAD_MIN,
+    DIAG_APPROACH_MAX,
+    DIAG_BROKEN,
+    DIAG_COUNT,
+    DIAG_DEFLECTION,
+    DIAG_KE,
+    DIAG_LX,
+    DIAG_LY,
+    DIAG_LZ,
+    DIAG_MIN_ALPHA,
+    DIAG_PX,
+    DIAG_PY,
+    DIAG_PZ,
+    DIAG_RECEDE_MAX,
+    DIAG_STRAIN,
+    DIAG_STRETCH,
     ENERGY_CONTACT,
     ENERGY_DAMAGE,
     ENERGY_FRICTION,
@@ -49,6 +66,7 @@ from emfabric._kernels.records import (
     ROW_FILL,
     ROW_NODE,
     ROW_WARP,
+    SUM_DIAG,
 )
 from emfabric._kernels.vec3 import (
     cross,
@@ -60,10 +78,12 @@ from emfabric._kernels.vec3 import (
     yaw_angle,
 )
 
-# indices of the scalar results
-(KE, PX, PY, PZ, LX, LY, LZ, DEFLECTION, STRETCH, STRAIN, BROKEN, MIN_ALPHA, AHEAD_MIN,
- AHEAD_MAX, APPROACH_MAX, RECEDE_MAX) = range(16)
-COUNT = 16
+# indices of the scalar results (records.DIAG_*)
+KE, PX, PY, PZ, LX, LY, LZ = DIAG_KE, DIAG_PX, DIAG_PY, DIAG_PZ, DIAG_LX, DIAG_LY, DIAG_LZ
+DEFLECTION, STRETCH, STRAIN, BROKEN = DIAG_DEFLECTION, DIAG_STRETCH, DIAG_STRAIN, DIAG_BROKEN
+MIN_ALPHA, AHEAD_MIN, AHEAD_MAX = DIAG_MIN_ALPHA, DIAG_AHEAD_MIN, DIAG_AHEAD_MAX
+APPROACH_MAX, RECEDE_MAX = DIAG_APPROACH_MAX, DIAG_RECEDE_MAX
+COUNT = DIAG_COUNT
 
 
 @njit(cache=True)
@@ -157,6 +177,31 @@ def fabric_diagnostics(phys, x, v, alpha, centre, direction, out):
     out[AHEAD_MAX] = ahead_max
     out[APPROACH_MAX] = approach
     out[RECEDE_MAX] = recede
+
+
+@njit(cache=True)
+def fabric_from_rows(sums, ny, out):
+    """fabric_diagnostics's results from the rows' shares that central differences' kick
+    leaves in the row sums (records.SUM_DIAG: sums, largest or smallest values per grid
+    row), reduced over the ny rows in row order: the same values but for the sums' rounding
+    (summed per row, then over rows), whatever the thread count."""
+    for k in range(COUNT):
+        r = sums[SUM_DIAG + k]
+        if k == STRETCH or k == DEFLECTION or k == AHEAD_MAX or k == APPROACH_MAX \
+                or k == RECEDE_MAX:
+            acc = 0.0 if k == STRETCH or k == DEFLECTION else -math.inf
+            for j in range(ny):
+                acc = max(acc, r[j])
+        elif k == MIN_ALPHA or k == AHEAD_MIN:
+            acc = 1.0 if k == MIN_ALPHA else math.inf
+            for j in range(ny):
+                acc = min(acc, r[j])
+        else:
+            acc = 0.0
+            for j in range(ny):
+                acc += r[j]
+        out[k] = acc
+    out[STRETCH] = math.sqrt(out[STRETCH])
 
 
 @njit(cache=True, inline="always")

@@ -41,7 +41,9 @@ from emfabric._kernels.contact import (
     find_segment_candidates,
     reaction_sums,
     segment_contact,
+    travel_limit,
 )
+from emfabric._kernels.diagnostics import fabric_from_rows
 from emfabric._kernels.energy import damage_release, impulse_dissipation
 from emfabric._kernels.fields import (
     field_at,
@@ -70,6 +72,7 @@ from emfabric._kernels.records import (
     ENERGY_PROJECTION,
     ENERGY_WORK_FIELD,
     ENERGY_WORK_GRAVITY,
+    SUM_MOTION,
     SUM_PROJECTION,
     SUM_SPEED,
     SUM_STIFFNESS,
@@ -246,6 +249,21 @@ def _body_field_work(phys, b0, b1, t0, t1):
     return w
 
 
+@njit(cache=True)
+def _travel_from_rows(phys, sums, ny, b_state):
+    """contact.travel_step at the kick's end state from its per-row largest |v|² and velocity
+    bounds (records.SUM_MOTION): the same value (maxima and minima are exact)."""
+    fastest = 0.0
+    lo = (math.inf, math.inf, math.inf)
+    hi = (-math.inf, -math.inf, -math.inf)
+    m = SUM_MOTION
+    for j in range(ny):
+        fastest = max(fastest, sums[m, j])
+        lo = (min(lo[0], sums[m + 1, j]), min(lo[1], sums[m + 2, j]), min(lo[2], sums[m + 3, j]))
+        hi = (max(hi[0], sums[m + 4, j]), max(hi[1], sums[m + 5, j]), max(hi[2], sums[m + 6, j]))
+    return travel_limit(phys, fastest, lo, hi, b_state)
+
+
 @njit(cache=True, nogil=True)
 def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol, energy):
     """One central-difference step from sin (at t) to sout (at t + Δt): nodes, body, contact,
@@ -256,8 +274,13 @@ def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol
     (ply contact) or its projectile meets segments (phys.contact.segments), else None: Numba
     then leaves that code out of the compiled kernel.
 
-    Returns (status, contacts, stable): stable the explicit stability limit at the new state
-    (stable_step's Gershgorin bound, from the force evaluation's tangent stiffnesses) [s];
+    Returns (status, contacts, stable, travel): stable the explicit stability limit at the new
+    state (stable_step's Gershgorin bound, from the force evaluation's tangent stiffnesses)
+    [s]; travel its no-tunnelling limit (contact.travel_step's, from the kick's row sums) [s];
+    The fabric diagnostics of sout (diagnostics.fabric_diagnostics's values, their sums
+    rounded in row order) into work.diag, about the body centre of sout and the flight
+    direction in work.frame[1].
+
     status OK; NOT_FINITE (a non-finite value: Δt too large or the run
     diverged); CONTACT_MISSED (a free node ended inside the body without being a contact
     candidate); BODY_NOT_CONVERGED (the mid-step rotation did not converge)."""
@@ -328,7 +351,7 @@ def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol
             b_out[BODY_X, c] = b_in[BODY_X, c] + dt * v_half
         _w_mid, ok = _mid_rotation(body, rot0, h_half, dt, tol, scratch, rot1)
         if not ok:
-            return BODY_NOT_CONVERGED, 0, math.inf
+            return BODY_NOT_CONVERGED, 0, math.inf, math.inf
         # the angular velocity at the new rotation before contact: the surface's velocity
         w_pre = _spin_solve(rot1, body, h_half, scratch)
         for c in range(3):
@@ -385,11 +408,17 @@ def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol
     # second half rotation and kick
     if with_sources(fld):
         fill_node_fields(fld, sout.x, sout.v, 0.0, t1, work.node_field)
+    for c in range(3):
+        work.frame[0, c] = b_out[BODY_X, c] if body.active else 0.0
     if rowbuf is None:
         if threads is not None:
             kick_rows_threads(phys, sin, sout, work, t1, dt, threads)
     else:
         kick_rows(phys, sin, sout, work, t1, dt, rowbuf)
+    # the history record's fabric diagnostics of the end state, from the kick's row shares,
+    # and the next step's no-tunnelling limit
+    fabric_from_rows(sums, ny, work.diag)
+    travel = _travel_from_rows(phys, sums, ny, b_out)
     w_field += _sum_rows(sums[SUM_WORK_FIELD], ny)
     w_grav += _sum_rows(sums[SUM_WORK_GRAVITY], ny)
     # the work of the node force over the displacement the kicks do not see: the kicks book
@@ -414,7 +443,7 @@ def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol
         total += b_out[BODY_V, c] + b_out[BODY_W, c]
     stable = 2.0 / math.sqrt(worst) if worst > 0.0 else math.inf
     if not math.isfinite(total):
-        return NOT_FINITE, nc, stable
+        return NOT_FINITE, nc, stable, travel
     if body.active and nodes_inside(sout.x, inv_mass, flag, body, b_out) > 0:
-        return CONTACT_MISSED, nc, stable
-    return OK, nc, stable
+        return CONTACT_MISSED, nc, stable, travel
+    return OK, nc, stable, travel

@@ -47,23 +47,51 @@ def tangent_factor(u2, mat):
     = dS/dE. KSV: (3U² − 1)/2 above U = 1; Fung: H e^{He²/2}(1 + He²)·U² + S/c. At least the
     value at U = 1 (1, or H for Fung): a slack yarn may be taut within the step. The largest
     eigenvalue of the network's stiffness, and so the explicit stable step, follow from it."""
-    e = 0.5 * max(u2 - 1.0, 0.0)
     if mat.kind == MATERIAL_FUNG:
-        h = mat.fung_h
-        g = math.exp(0.5 * h * e * e)
-        return h * g * (1.0 + h * e * e) * max(u2, 1.0) + h * e * g
+        return fung_tangent(u2, mat.fung_h)
+    return ksv_tangent(u2)
+
+
+@njit(cache=True, inline="always")
+def ksv_tangent(u2):
+    """tangent_factor of relaxed KSV: (3U² − 1)/2, at least 1."""
     return max(1.0, 0.5 * (3.0 * u2 - 1.0))
+
+
+@njit(cache=True, inline="always")
+def fung_tangent(u2, fung_h):
+    """tangent_factor of relaxed Fung."""
+    e = 0.5 * max(u2 - 1.0, 0.0)
+    h = fung_h
+    g = math.exp(0.5 * h * e * e)
+    return h * g * (1.0 + h * e * e) * max(u2, 1.0) + h * e * g
+
+
+@njit(cache=True, inline="always")
+def ksv_energy(u2):
+    """Relaxed KSV stored energy per unit reference volume over 𝔼: e²/2 above U = 1."""
+    if u2 <= 1.0:
+        return 0.0
+    e = 0.5 * (u2 - 1.0)
+    return 0.5 * e * e
+
+
+@njit(cache=True, inline="always")
+def fung_energy(u2, fung_h):
+    """Relaxed Fung stored energy per unit reference volume over c: exp(H e²/2) − 1 above
+    U = 1."""
+    if u2 <= 1.0:
+        return 0.0
+    e = 0.5 * (u2 - 1.0)
+    return math.expm1(0.5 * fung_h * e * e)
 
 
 @njit(cache=True, inline="always")
 def strain_energy_density(u2, mat):
     """Stored energy per unit reference volume divided by the modulus (𝔼 or c), relaxed."""
-    if u2 <= 1.0:
-        return 0.0
-    e = 0.5 * (u2 - 1.0)
     if mat.kind == MATERIAL_FUNG:
-        return math.expm1(0.5 * mat.fung_h * e * e)
-    return 0.5 * e * e
+        return fung_energy(u2, mat.fung_h)
+    return ksv_energy(u2)
 
 
 @njit(cache=True)

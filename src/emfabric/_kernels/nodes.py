@@ -20,17 +20,39 @@ the same arithmetic.
 
 import math
 
-from numba import njit, prange
+from numba import njit, prange, uint64
 
 from emfabric._kernels.fields import magnetic_force, node_field_of, uniform_field
-from emfabric._kernels.materials import damage_above, stress_factor, stretch_sq, tangent_factor
+from emfabric._kernels.materials import (
+    damage_above,
+    fung_energy,
+    fung_stress,
+    fung_tangent,
+    ksv_energy,
+    ksv_stress,
+    ksv_tangent,
+    stretch_sq,
+)
 from emfabric._kernels.records import (
+    DIAG_AHEAD_MAX,
+    DIAG_AHEAD_MIN,
+    DIAG_APPROACH_MAX,
+    DIAG_BROKEN,
+    DIAG_DEFLECTION,
+    DIAG_KE,
+    DIAG_MIN_ALPHA,
+    DIAG_RECEDE_MAX,
+    DIAG_STRAIN,
+    DIAG_STRETCH,
+    MATERIAL_FUNG,
     ROW_COUNT,
     ROW_FILL,
     ROW_NODE,
     ROW_WARP,
+    SUM_DIAG,
     SUM_ERROR_DEN,
     SUM_ERROR_NUM,
+    SUM_MOTION,
     SUM_PROJECTION,
     SUM_SPEED,
     SUM_STIFFNESS,
@@ -104,53 +126,133 @@ ROW_INV_DENOM = 27
 ROW_DT_OVER_MASS = 28
 """Δt/m (0 for a clamped node)."""
 ROWBUF_ROWS = 29
+RKW = ROW_WARP_TENSION + 3
+"""The warp segments' tangent stiffness (padded as their tensions)."""
+ROW_SEGMENT_ENERGY = ROW_FORCE
+"""_tensions with STATS: each segment's stored energy (the force rows are written only after
+the row's tensions)."""
+ROW_DIAG = ROW_SEGMENT
+"""Central differences' kick: per-node terms of the fabric diagnostics' sums (7 rows: kinetic
+energy, momentum, angular momentum), once the row's force is consumed."""
 
 ALPHA = 1
 """_tensions mode bit: write the trial damage α."""
 TANGENT = 2
 """_tensions mode bit: write each segment's axial tangent stiffness (the stable step's)."""
+STATS = 4
+"""_tensions mode bit: return the segments' share of the fabric diagnostics (_segment_stats)."""
+NO_STATS = (0.0, 0.0, 0.0, 1.0)
+"""_segment_stats of no segments: (max U² of the unbroken, strain energy, broken, min α)."""
+
+
+@njit(cache=True, inline="always")
+def _segment_stats(buf, s, coef, rest2, mat, count):
+    """The fabric diagnostics' share of `count` segments s + i with damage buf[ROW_STRESS] and
+    stretch² buf[ROW_STRETCH_SQ] (diagnostics.fabric_diagnostics's terms): (max U² of those
+    not broken, strain energy Σ α stiffness L0² W(U²) in _row_total's order, broken count,
+    min α); buf[ROW_SEGMENT_ENERGY]: scratch."""
+    bb = mat.broken_below
+    if mat.kind == MATERIAL_FUNG:
+        h = mat.fung_h
+        for i in range(count):
+            u = uint64(i)
+            buf[ROW_SEGMENT_ENERGY, u] = (buf[ROW_STRESS, u] * coef[uint64(s + i)] * rest2
+                                          * fung_energy(buf[ROW_STRETCH_SQ, u], h))
+    else:
+        for i in range(count):
+            u = uint64(i)
+            buf[ROW_SEGMENT_ENERGY, u] = (buf[ROW_STRESS, u] * coef[uint64(s + i)] * rest2
+                                          * ksv_energy(buf[ROW_STRETCH_SQ, u]))
+    u2max = 0.0
+    broken = 0.0
+    amin = 1.0
+    for i in range(count):
+        u = uint64(i)
+        a = buf[ROW_STRESS, u]
+        if a >= bb:
+            u2max = max(u2max, buf[ROW_STRETCH_SQ, u])
+        else:
+            broken += 1.0
+        amin = min(amin, a)
+    return u2max, _buf_total(buf, ROW_SEGMENT_ENERGY, count), broken, amin
 
 
 @njit(cache=True)
-def _tensions(xa, xb, count, inv_rest2, seg, mat, buf, out, mode):
-    """Tension vectors of `count` segments joining a[i] to b[i] into out[:3, :count], and with
-    mode & TANGENT their axial tangent stiffness α·stiffness·materials.tangent_factor into
-    out[3, :count].
+def _tensions(x, span, inv_rest2, rest2, alpha_c, alpha_t, damage_thr, coef, mat, buf, out,
+              mode):
+    """Tension vectors of `count` segments into buf[r:r + 3, c:c + count], out = (r, c), and
+    with mode & TANGENT their axial tangent stiffness α·stiffness·materials.tangent_factor
+    into buf[r + 3, c:c + count]. Returns, with mode & STATS, the segments' share of the
+    fabric diagnostics at the trial α (_segment_stats), else NO_STATS.
 
-    xa, xb: the (x, y, z) row views of the end nodes; seg: the segments' views (committed α,
-    trial α written when mode & ALPHA, damage thresholds U², stiffness); inv_rest2: their 1/L0².
-    Split into short loops over few arrays so that the compiler vectorises them.
+    span = (a, step, s, count): segment s + i joins node a + i to node a + i + step, at the
+    positions x (3, N); the segment arrays (committed α, trial α written when mode & ALPHA,
+    damage thresholds U², stiffness) are whole; inv_rest2, rest2: their 1/L0² and L0².
+
+    Every array is indexed directly, with unsigned indices (no views: Numba references and
+    releases each view it makes, an atomic operation each, ~16 % of a step when this took row
+    views; unsigned, the index needs no wrap-around test and the loops vectorise as over
+    views). Split into short loops over few arrays so that the compiler vectorises them.
     """
-    xa_x, xa_y, xa_z = xa
-    xb_x, xb_y, xb_z = xb
-    alpha_c, alpha_t, damage_thr, coef = seg
-    dx, dy, dz = buf[ROW_SEGMENT], buf[ROW_SEGMENT + 1], buf[ROW_SEGMENT + 2]
-    u2 = buf[ROW_STRETCH_SQ]
-    al = buf[ROW_STRESS]
+    a, step, s, count = span
+    r, col = out
     for i in range(count):
-        dx[i] = xb_x[i] - xa_x[i]
-        dy[i] = xb_y[i] - xa_y[i]
-        dz[i] = xb_z[i] - xa_z[i]
+        u = uint64(i)
+        ka = uint64(a + i)
+        kb = uint64(a + step + i)
+        buf[ROW_SEGMENT, u] = x[0, kb] - x[0, ka]
+        buf[ROW_SEGMENT + 1, u] = x[1, kb] - x[1, ka]
+        buf[ROW_SEGMENT + 2, u] = x[2, kb] - x[2, ka]
     for i in range(count):
-        u2[i] = stretch_sq(dx[i], dy[i], dz[i], inv_rest2)
+        u = uint64(i)
+        buf[ROW_STRETCH_SQ, u] = stretch_sq(buf[ROW_SEGMENT, u], buf[ROW_SEGMENT + 1, u],
+                                            buf[ROW_SEGMENT + 2, u], inv_rest2)
     for i in range(count):
-        al[i] = damage_above(alpha_c[i], u2[i], damage_thr[i], mat)
+        u = uint64(i)
+        k = uint64(s + i)
+        buf[ROW_STRESS, u] = damage_above(alpha_c[k], buf[ROW_STRETCH_SQ, u], damage_thr[k],
+                                          mat)
     if mode & ALPHA:
         for i in range(count):
-            alpha_t[i] = al[i]
+            alpha_t[uint64(s + i)] = buf[ROW_STRESS, uint64(i)]
+    # the material's kind is dispatched outside each loop: left to the compiler, a large
+    # enough function is not unswitched, and the vectorised loop then calls exp for every
+    # segment of every law
+    fung = mat.kind == MATERIAL_FUNG
+    h = mat.fung_h
     if mode & TANGENT:
-        kt = out[3]
+        rt = r + 3
+        if fung:
+            for i in range(count):
+                u = uint64(i)
+                buf[rt, uint64(col + i)] = (buf[ROW_STRESS, u] * coef[uint64(s + i)]
+                                            * fung_tangent(buf[ROW_STRETCH_SQ, u], h))
+        else:
+            for i in range(count):
+                u = uint64(i)
+                buf[rt, uint64(col + i)] = (buf[ROW_STRESS, u] * coef[uint64(s + i)]
+                                            * ksv_tangent(buf[ROW_STRETCH_SQ, u]))
+    stats = NO_STATS
+    if mode & STATS:
+        stats = _segment_stats(buf, s, coef, rest2, mat, count)
+    # the stress law (materials.stress_factor's two laws)
+    if fung:
         for i in range(count):
-            kt[i] = al[i] * coef[i] * tangent_factor(u2[i], mat)
-    tx, ty, tz = out[0], out[1], out[2]
-    # the stress law (materials.stress_factor, the one dispatch on the material's kind: the
-    # branch is loop-invariant, so the compiler splits the loop and vectorises each law)
+            u = uint64(i)
+            buf[ROW_STRESS, u] = (buf[ROW_STRESS, u] * coef[uint64(s + i)]
+                                  * fung_stress(buf[ROW_STRETCH_SQ, u], h))
+    else:
+        for i in range(count):
+            u = uint64(i)
+            buf[ROW_STRESS, u] = (buf[ROW_STRESS, u] * coef[uint64(s + i)]
+                                  * ksv_stress(buf[ROW_STRETCH_SQ, u]))
     for i in range(count):
-        al[i] = al[i] * coef[i] * stress_factor(u2[i], mat)
-    for i in range(count):
-        tx[i] = al[i] * dx[i]
-        ty[i] = al[i] * dy[i]
-        tz[i] = al[i] * dz[i]
+        u = uint64(i)
+        o = uint64(col + i)
+        buf[r, o] = buf[ROW_STRESS, u] * buf[ROW_SEGMENT, u]
+        buf[r + 1, o] = buf[ROW_STRESS, u] * buf[ROW_SEGMENT + 1, u]
+        buf[r + 2, o] = buf[ROW_STRESS, u] * buf[ROW_SEGMENT + 2, u]
+    return stats
 
 
 @njit(cache=True)
@@ -158,89 +260,80 @@ def _block_start(j0, phys, prev, sin, sout, work, buf, mode):
     """Prepare a block's row buffer before its first row j0: zero the padding of the warp row
     and set the fill tensions (with mode & TANGENT their stiffness) from the row below
     (recomputed, writing no damage, so that blocks are independent; zero for the first row of
-    a ply). Returns (fill_up, fill_down) views."""
+    a ply). Returns the first buffer rows (fill up, fill down): ROW_FILL_UP, ROW_FILL_DOWN."""
     nodes, yarns, mat = phys.nodes, phys.yarns, phys.material
     rows = nodes.rows
-    xx, xy, xz = prev[0], prev[1], prev[2]
-    twp = buf[ROW_WARP_TENSION:ROW_WARP_TENSION + 4]
-    tu = buf[ROW_FILL_UP:ROW_FILL_UP + 4]
-    td = buf[ROW_FILL_DOWN:ROW_FILL_DOWN + 4]
-    twp[:, 0] = 0.0
+    for c in range(4):
+        buf[ROW_WARP_TENSION + c, 0] = 0.0
     s = rows[j0 - 1, ROW_FILL] if j0 > 0 else -1
     if s >= 0:
         a = rows[j0 - 1, ROW_NODE]
         nx = rows[j0 - 1, ROW_COUNT]
-        coef = yarns.stiffness
-        _tensions((xx[a:a + nx], xy[a:a + nx], xz[a:a + nx]),
-                  (xx[a + nx:a + 2 * nx], xy[a + nx:a + 2 * nx], xz[a + nx:a + 2 * nx]), nx,
-                  yarns.inv_rest2[s],
-                  (sin.alpha[s:s + nx], sout.alpha[s:s + nx], work.damage_thr[s:s + nx],
-                   coef[s:s + nx]), mat, buf, td, mode & TANGENT)
+        _tensions(prev, (a, nx, s, nx), yarns.inv_rest2[s], 0.0, sin.alpha, sout.alpha,
+                  work.damage_thr, yarns.stiffness, mat, buf, (ROW_FILL_DOWN, 0),
+                  mode & TANGENT)
     else:
-        td[:] = 0.0
-    return tu, td
+        buf[ROW_FILL_DOWN:ROW_FILL_DOWN + 4] = 0.0
+    return ROW_FILL_UP, ROW_FILL_DOWN
 
 
 @njit(cache=True, inline="always")
-def _row_force(j, arr, mat, uni, sourced, grav, prev, buf, tu, td, mode):
+def _row_force(j, arr, mat, uni, sourced, grav, prev, buf, ru, rd, mode):
     """The non-magnetic force of grid row j at the positions `prev` (and the step's end time:
     the field is uniform, or the node fields stored for it) into the row buffer's ROW_FORCE
     rows: yarn tensions (the warp segments of row j and the fill segments to row j + 1, into
-    tu; td holds those from row j − 1), one difference per node and direction, plus the
-    electric part of eq. 2.7 and gravity. Trial damage into arr.alpha_trial; with
-    mode & TANGENT the segments' tangent stiffness into row 3 of the warp row, tu and td.
+    buffer rows ru; rows rd hold those from row j − 1), one difference per node and
+    direction, plus the electric part of eq. 2.7 and gravity. Trial damage into
+    arr.alpha_trial; with mode & TANGENT the segments' tangent stiffness into row 3 of the
+    warp rows, ru and rd. Returns, with mode & STATS, the fabric diagnostics' share of the
+    row's warp segments and of the fill segments to row j + 1 (_segment_stats, merged), else
+    NO_STATS.
 
     The one force evaluation of both schemes: the φ-update (_row_block) and central
     differences (_kick_block) call it row by row, inlined, given arrays and numbers rather than
     Physics's records (_rotate_row says why): arr a records.RowArrays built once per block, the
     material, the field as fields.uniform_field gives it, gravity as a tuple."""
-    rows, mass, charge, inv_rest2, coef, alpha_c, alpha_t, damage_thr, node_fields = arr
+    rows, mass, charge, inv_rest2, rest, coef, alpha_c, alpha_t, damage_thr, node_fields = arr
     # the row's nodes and first segments (records.Nodes.rows); rest lengths are uniform per
     # yarn family within a ply
     nb = rows[j, ROW_NODE]
     nx = rows[j, ROW_COUNT]
     sb = rows[j, ROW_WARP]
     sf = rows[j, ROW_FILL]
-    xx, xy, xz = prev[0], prev[1], prev[2]
-    # padded warp row: twp[:, i + 1] is the tension of segment (i, i + 1), zeros at both ends
-    twp = buf[ROW_WARP_TENSION:ROW_WARP_TENSION + 4]
-    twp[:, nx] = 0.0
-    f = buf[ROW_FORCE:ROW_FORCE + 3]
-    e = nb + nx
-    _tensions((xx[nb:e - 1], xy[nb:e - 1], xz[nb:e - 1]), (xx[nb + 1:e], xy[nb + 1:e],
-              xz[nb + 1:e]), nx - 1, inv_rest2[sb],
-              (alpha_c[sb:sb + nx - 1], alpha_t[sb:sb + nx - 1],
-               damage_thr[sb:sb + nx - 1], coef[sb:sb + nx - 1]), mat, buf, twp[:, 1:],
-              mode | ALPHA)
+    # padded warp rows: column i + 1 is the tension of segment (i, i + 1), zeros at both ends
+    for c in range(4):
+        buf[ROW_WARP_TENSION + c, nx] = 0.0
+    sw = _tensions(prev, (nb, 1, sb, nx - 1), inv_rest2[sb], rest[sb] ** 2, alpha_c, alpha_t,
+                   damage_thr, coef, mat, buf, (ROW_WARP_TENSION, 1), mode | ALPHA)
+    sfl = NO_STATS
     if sf >= 0:
-        _tensions((xx[nb:e], xy[nb:e], xz[nb:e]), (xx[e:e + nx], xy[e:e + nx],
-                  xz[e:e + nx]), nx, inv_rest2[sf],
-                  (alpha_c[sf:sf + nx], alpha_t[sf:sf + nx],
-                   damage_thr[sf:sf + nx], coef[sf:sf + nx]), mat, buf, tu,
-                  mode | ALPHA)
+        sfl = _tensions(prev, (nb, nx, sf, nx), inv_rest2[sf], rest[sf] ** 2, alpha_c,
+                        alpha_t, damage_thr, coef, mat, buf, (ru, 0), mode | ALPHA)
     else:
         # the ply's last row: no fill above it (the whole width, so that the first row of the
         # next ply finds no tension from below)
-        tu[:, :] = 0.0
-    m = mass[nb:e]
-    q = charge[nb:e]
+        buf[ru:ru + 4] = 0.0
     # the field at t1 where the node is now (the iterate). The uniform and half-space
     # fields: field_at in each loop that needs it (a compare and a select, cheaper than a
     # row of stores and loads: the stored variant made an evaluation ~7 % slower); a field
     # with sources: the value fields.fill_node_fields stored for this attempt (at the
     # predicted position). fields.node_field_of, chosen at compile time by the field's type
-    px, py, pz = xx[nb:e], xy[nb:e], xz[nb:e]
     for c in range(3):
-        fc = f[c]
-        tw = twp[c]
-        tuc = tu[c]
-        tdc = td[c]
+        rw = ROW_WARP_TENSION + c
+        rf = ROW_FORCE + c
+        rfu = ru + c
+        rfd = rd + c
         g = grav[c]
         # yarn force, one difference per node and direction (mirror-exact assembly),
         # then the electric part of eq. 2.7 and gravity
         for i in range(nx):
-            fe, _fb = node_field_of(uni, sourced, node_fields, nb + i, (px[i], py[i], pz[i]))
-            fc[i] = ((tw[i + 1] - tw[i]) + (tuc[i] - tdc[i])) + (m[i] * g + q[i] * fe[c])
+            u = uint64(i)
+            k = uint64(nb + i)
+            fe, _fb = node_field_of(uni, sourced, node_fields, nb + i,
+                                    (prev[0, k], prev[1, k], prev[2, k]))
+            buf[rf, u] = (((buf[rw, u + uint64(1)] - buf[rw, u]) + (buf[rfu, u] - buf[rfd, u]))
+                          + (mass[k] * g + charge[k] * fe[c]))
+    return (max(sw[0], sfl[0]), sw[1] + sfl[1], sw[2] + sfl[2], min(sw[3], sfl[3]))
 
 
 @njit(cache=True)
@@ -251,15 +344,15 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
     uni, sourced = uniform_field(fld)
     grav = (fld.gravity[0], fld.gravity[1], fld.gravity[2])
     node_fields = work.node_field
-    arr = RowArrays(nodes.rows, nodes.mass, nodes.charge, yarns.inv_rest2, yarns.stiffness,
-                    sin.alpha, sout.alpha, work.damage_thr, node_fields)
+    arr = RowArrays(nodes.rows, nodes.mass, nodes.charge, yarns.inv_rest2, yarns.rest_length,
+                    yarns.stiffness, sin.alpha, sout.alpha, work.damage_thr, node_fields)
     x0, v0, f0 = sin.x, sin.v, sin.f
     x1, v1, f1 = sout.x, sout.v, sout.f
     skip_err = work.flag
     err_num, err_den = work.err_num, work.err_den
     inv_mass, charge = nodes.inv_mass, nodes.charge
     xx, xy, xz = prev[0], prev[1], prev[2]
-    tu, td = _block_start(j0, phys, prev, sin, sout, work, buf, 0)
+    ru, rd = _block_start(j0, phys, prev, sin, sout, work, buf, 0)
     f = buf[ROW_FORCE:ROW_FORCE + 3]
     acc = buf[ROW_VEL_EXPLICIT:ROW_VEL_EXPLICIT + 3]
     uu = buf[ROW_ROTATION:ROW_ROTATION + 3]
@@ -267,7 +360,7 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
     inv = buf[ROW_INV_DENOM]
     dt_over_m = buf[ROW_DT_OVER_MASS]
     for j in range(j0, j1):
-        _row_force(j, arr, mat, uni, sourced, grav, prev, buf, tu, td, 0)
+        _row_force(j, arr, mat, uni, sourced, grav, prev, buf, ru, rd, 0)
         nb = nodes.rows[j, ROW_NODE]
         nx = nodes.rows[j, ROW_COUNT]
         e = nb + nx
@@ -332,7 +425,7 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
             dy = py[i] - sy[i]
             dz = pz[i] - sz[i]
             ed[i] = keep * math.sqrt(dx * dx + dy * dy + dz * dz)
-        tu, td = td, tu
+        ru, rd = rd, ru
 
 
 ROWS_PER_BLOCK = 16
@@ -404,10 +497,11 @@ def tan_ratio(y2):
 
 
 @njit(cache=True, inline="always")
-def _rotate_row(nb, count, inv_mass, charge, uni, sourced, nf, pos, tau, v, buf):
-    """Turn the velocities v (a tuple of three row views of `count` nodes from node nb) by the
-    magnetic force alone for a time tau: dv/dt = (q/m) v × B(pos), B constant over tau (the
-    field as fields.uniform_field gives it, or the node fields nf of a field with sources).
+def _rotate_row(nb, count, inv_mass, charge, uni, sourced, nf, x, tau, v, vat, buf):
+    """Turn the velocities of `count` nodes from node nb, v[r + c, col + i] for node nb + i
+    (vat = (r, col): a state's velocities, or rows of the row buffer), by the magnetic force
+    alone for a time tau: dv/dt = (q/m) v × B(x), B constant over tau (the field as
+    fields.uniform_field gives it, or the node fields nf of a field with sources).
 
     Boris's rotation v' = v + v × t, v ← v + v' × 2t/(1 + |t|²) with t = tan(θ/2) B̂·sign(q)
     turns by exactly θ = |q B/m| tau (the standard t = q B tau/(2m) turns by 2 atan(θ/2)): the
@@ -420,52 +514,59 @@ def _rotate_row(nb, count, inv_mass, charge, uni, sourced, nf, pos, tau, v, buf)
     references every array of a record bound to a function's argument on entry and releases
     it on exit (an atomic increment and decrement each). Called per row with the Physics
     record, and then inlined with its sub-records, that was ~60 arrays a row and 21 % of a
-    central-difference step (`perf`); now a few.
+    central-difference step (`perf`). Row views cost the same (each is referenced and
+    released): the arrays are indexed directly with unsigned indices (_tensions says why).
     """
-    im = inv_mass[nb:nb + count]
-    q = charge[nb:nb + count]
-    px, py, pz = pos
-    vx, vy, vz = v
-    tx, ty, tz = buf[ROW_ROTATION], buf[ROW_ROTATION + 1], buf[ROW_ROTATION + 2]
-    y2 = buf[ROW_PROJECTION]
+    r, col = vat
     for i in range(count):
-        _e, b = node_field_of(uni, sourced, nf, nb + i, (px[i], py[i], pz[i]))
-        s = 0.5 * tau * q[i] * im[i]
-        tx[i] = s * b[0]
-        ty[i] = s * b[1]
-        tz[i] = s * b[2]
-    for i in range(count):
-        y2[i] = tx[i] * tx[i] + ty[i] * ty[i] + tz[i] * tz[i]
+        u = uint64(i)
+        k = uint64(nb + i)
+        _e, b = node_field_of(uni, sourced, nf, nb + i, (x[0, k], x[1, k], x[2, k]))
+        s = 0.5 * tau * charge[k] * inv_mass[k]
+        buf[ROW_ROTATION, u] = s * b[0]
+        buf[ROW_ROTATION + 1, u] = s * b[1]
+        buf[ROW_ROTATION + 2, u] = s * b[2]
     big = 0.0
     for i in range(count):
-        big = max(big, y2[i])
+        u = uint64(i)
+        y2 = (buf[ROW_ROTATION, u] * buf[ROW_ROTATION, u]
+              + buf[ROW_ROTATION + 1, u] * buf[ROW_ROTATION + 1, u]
+              + buf[ROW_ROTATION + 2, u] * buf[ROW_ROTATION + 2, u])
+        buf[ROW_PROJECTION, u] = y2
+        big = max(big, y2)
     if big == 0.0:
         return
     if big < TAN_SERIES_LIMIT:
         for i in range(count):
-            g = tan_ratio(y2[i])
-            tx[i] *= g
-            ty[i] *= g
-            tz[i] *= g
+            u = uint64(i)
+            g = tan_ratio(buf[ROW_PROJECTION, u])
+            buf[ROW_ROTATION, u] *= g
+            buf[ROW_ROTATION + 1, u] *= g
+            buf[ROW_ROTATION + 2, u] *= g
         for i in range(count):
-            ax, ay, az = tx[i], ty[i], tz[i]
+            u = uint64(i)
+            w = uint64(col + i)
+            ax, ay, az = buf[ROW_ROTATION, u], buf[ROW_ROTATION + 1, u], buf[ROW_ROTATION + 2, u]
             k = 2.0 / (1.0 + (ax * ax + ay * ay + az * az))
             sx, sy, sz = k * ax, k * ay, k * az
-            ux = vx[i] + (vy[i] * az - vz[i] * ay)
-            uy = vy[i] + (vz[i] * ax - vx[i] * az)
-            uz = vz[i] + (vx[i] * ay - vy[i] * ax)
-            vx[i] += uy * sz - uz * sy
-            vy[i] += uz * sx - ux * sz
-            vz[i] += ux * sy - uy * sx
+            vx, vy, vz = v[r, w], v[r + 1, w], v[r + 2, w]
+            ux = vx + (vy * az - vz * ay)
+            uy = vy + (vz * ax - vx * az)
+            uz = vz + (vx * ay - vy * ax)
+            v[r, w] = vx + (uy * sz - uz * sy)
+            v[r + 1, w] = vy + (uz * sx - ux * sz)
+            v[r + 2, w] = vz + (ux * sy - uy * sx)
         return
     for i in range(count):
-        if y2[i] == 0.0:
+        if buf[ROW_PROJECTION, uint64(i)] == 0.0:
             continue
-        _e, b = node_field_of(uni, sourced, nf, nb + i, (px[i], py[i], pz[i]))
-        r = rodrigues((vx[i], vy[i], vz[i]), q[i] * im[i], b, tau)
-        vx[i] = r[0]
-        vy[i] = r[1]
-        vz[i] = r[2]
+        k = uint64(nb + i)
+        w = uint64(col + i)
+        _e, b = node_field_of(uni, sourced, nf, nb + i, (x[0, k], x[1, k], x[2, k]))
+        rv = rodrigues((v[r, w], v[r + 1, w], v[r + 2, w]), charge[k] * inv_mass[k], b, tau)
+        v[r, w] = rv[0]
+        v[r + 1, w] = rv[1]
+        v[r + 2, w] = rv[2]
 
 
 @njit(cache=True, inline="always")
@@ -484,6 +585,24 @@ def rodrigues(v, q_over_m, b, h):
     return (v[0] * cs + (ky * v[2] - kz * v[1]) * sn + kx * kv,
             v[1] * cs + (kz * v[0] - kx * v[2]) * sn + ky * kv,
             v[2] * cs + (kx * v[1] - ky * v[0]) * sn + kz * kv)
+
+
+@njit(cache=True, inline="always")
+def _buf_total(buf, r, count):
+    """Σ buf[r, :count] in _row_total's order (unsigned indices: no view)."""
+    s0 = s1 = s2 = s3 = 0.0
+    i = 0
+    while i + 3 < count:
+        u = uint64(i)
+        s0 += buf[r, u]
+        s1 += buf[r, u + uint64(1)]
+        s2 += buf[r, u + uint64(2)]
+        s3 += buf[r, u + uint64(3)]
+        i += 4
+    while i < count:
+        s0 += buf[r, uint64(i)]
+        i += 1
+    return (s0 + s1) + (s2 + s3)
 
 
 @njit(cache=True)
@@ -515,46 +634,44 @@ def _drift_block(j0, j1, phys, sin, sout, work, t0, dt, buf):
     sums = work.row_sums
     grav = (fld.gravity[0], fld.gravity[1], fld.gravity[2])
     half = 0.5 * dt
-    vm = buf[ROW_VEL_EXPLICIT:ROW_VEL_EXPLICIT + 3]
-    wfield, wgrav = buf[ROW_INV_DENOM], buf[ROW_DT_OVER_MASS]
+    inv_mass, mass, charge = nodes.inv_mass, nodes.mass, nodes.charge
+    x0, v0, f0, e0 = sin.x, sin.v, sin.f, sin.e
+    x1, v1 = sout.x, sout.v
+    vm = ROW_VEL_EXPLICIT
+    # arrays indexed directly with unsigned indices, no row views (_tensions says why)
     for j in range(j0, j1):
         nb = nodes.rows[j, ROW_NODE]
         nx = nodes.rows[j, ROW_COUNT]
-        e = nb + nx
-        im = nodes.inv_mass[nb:e]
-        m = nodes.mass[nb:e]
-        q = nodes.charge[nb:e]
-        px, py, pz = sin.x[0, nb:e], sin.x[1, nb:e], sin.x[2, nb:e]
-        ux, uy, uz = sin.v[0, nb:e], sin.v[1, nb:e], sin.v[2, nb:e]
-        fx, fy, fz = sin.f[0, nb:e], sin.f[1, nb:e], sin.f[2, nb:e]
-        ex, ey, ez = sin.e[0, nb:e], sin.e[1, nb:e], sin.e[2, nb:e]
-        wx, wy, wz = vm[0], vm[1], vm[2]
         for i in range(nx):
+            u = uint64(i)
+            k = uint64(nb + i)
             # the State's force is the whole ψ(t) (as the φ-scheme's): without q v × B
-            _e, b = node_field_of(uni, sourced, nf, nb + i, (px[i], py[i], pz[i]))
-            fm = magnetic_force(q[i], (ux[i], uy[i], uz[i]), b)
-            k = half * im[i]
-            wx[i] = ux[i] + k * (fx[i] - fm[0])
-            wy[i] = uy[i] + k * (fy[i] - fm[1])
-            wz[i] = uz[i] + k * (fz[i] - fm[2])
+            _e, b = node_field_of(uni, sourced, nf, nb + i, (x0[0, k], x0[1, k], x0[2, k]))
+            fm = magnetic_force(charge[k], (v0[0, k], v0[1, k], v0[2, k]), b)
+            hk = half * inv_mass[k]
+            buf[vm, u] = v0[0, k] + hk * (f0[0, k] - fm[0])
+            buf[vm + 1, u] = v0[1, k] + hk * (f0[1, k] - fm[1])
+            buf[vm + 2, u] = v0[2, k] + hk * (f0[2, k] - fm[2])
         for i in range(nx):
-            bx = 0.5 * (ux[i] + wx[i])
-            by = 0.5 * (uy[i] + wy[i])
-            bz = 0.5 * (uz[i] + wz[i])
-            wfield[i] = half * q[i] * ((ex[i] * bx + ey[i] * by) + ez[i] * bz)
-            wgrav[i] = half * m[i] * ((grav[0] * bx + grav[1] * by) + grav[2] * bz)
-        sums[SUM_WORK_FIELD, j] = _row_total(wfield, nx)
-        sums[SUM_WORK_GRAVITY, j] = _row_total(wgrav, nx)
-        _rotate_row(nb, nx, nodes.inv_mass, nodes.charge, uni, sourced, nf, (px, py, pz), half,
-                    (wx, wy, wz), buf)
+            u = uint64(i)
+            k = uint64(nb + i)
+            bx = 0.5 * (v0[0, k] + buf[vm, u])
+            by = 0.5 * (v0[1, k] + buf[vm + 1, u])
+            bz = 0.5 * (v0[2, k] + buf[vm + 2, u])
+            buf[ROW_INV_DENOM, u] = half * charge[k] * ((e0[0, k] * bx + e0[1, k] * by)
+                                                        + e0[2, k] * bz)
+            buf[ROW_DT_OVER_MASS, u] = half * mass[k] * ((grav[0] * bx + grav[1] * by)
+                                                         + grav[2] * bz)
+        sums[SUM_WORK_FIELD, j] = _buf_total(buf, ROW_INV_DENOM, nx)
+        sums[SUM_WORK_GRAVITY, j] = _buf_total(buf, ROW_DT_OVER_MASS, nx)
+        _rotate_row(nb, nx, inv_mass, charge, uni, sourced, nf, x0, half, buf, (vm, 0), buf)
         for c in range(3):
-            x0c = sin.x[c, nb:e]
-            x1c = sout.x[c, nb:e]
-            v1c = sout.v[c, nb:e]
-            wc = vm[c]
             for i in range(nx):
-                v1c[i] = wc[i]
-                x1c[i] = x0c[i] + (dt if im[i] > 0.0 else 0.0) * wc[i]
+                u = uint64(i)
+                k = uint64(nb + i)
+                w = buf[vm + c, u]
+                v1[c, k] = w
+                x1[c, k] = x0[c, k] + (dt if inv_mass[k] > 0.0 else 0.0) * w
 
 
 @njit(cache=True)
@@ -564,35 +681,42 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
     evaluation), consumed at once by the node update v_{n+½} (sout.v, after contact) turned by
     B(x_{n+1}, t1) for h/2, then v_{n+1} = v⁺ + h/(2m) f; sout.f = f + q v_{n+1} × B and sout.e
     = E. Per row into work.row_sums: the half kick's field and gravity work, the projection
-    term of the contact candidates (explicit.central_step), Σ|v_{n+1}|² and the largest
-    2 Σ k_t/m of its nodes (the Gershgorin bound of ω² of explicit.stable_step)."""
+    term of the contact candidates (explicit.central_step), Σ|v_{n+1}|², the largest
+    2 Σ k_t/m of its nodes (the Gershgorin bound of ω² of explicit.stable_step) and its share
+    of the fabric diagnostics of the end state (records.SUM_DIAG; the frame in work.frame):
+    the nodes and segments are in the cache here, so the history record costs no pass of its
+    own."""
     nodes, yarns, mat, fld = phys.nodes, phys.yarns, phys.material, phys.field
     uni, sourced = uniform_field(fld)
     nf = work.node_field
-    arr = RowArrays(nodes.rows, nodes.mass, nodes.charge, yarns.inv_rest2, yarns.stiffness,
-                    sin.alpha, sout.alpha, work.damage_thr, nf)
+    arr = RowArrays(nodes.rows, nodes.mass, nodes.charge, yarns.inv_rest2, yarns.rest_length,
+                    yarns.stiffness, sin.alpha, sout.alpha, work.damage_thr, nf)
     sums = work.row_sums
     flag, xbuf, v_pre = work.flag, work.xbuf, work.v_pre
     grav = (fld.gravity[0], fld.gravity[1], fld.gravity[2])
     half = 0.5 * dt
     x1, v1 = sout.x, sout.v
-    tu, td = _block_start(j0, phys, x1, sin, sout, work, buf, TANGENT)
-    f = buf[ROW_FORCE:ROW_FORCE + 3]
-    kw = buf[ROW_WARP_TENSION + 3]
-    wfield, wgrav, speed2 = buf[ROW_INV_DENOM], buf[ROW_DT_OVER_MASS], buf[ROW_VEL_EXPLICIT]
+    zref = nodes.x0
+    frame = work.frame
+    cx, cy, cz = frame[0, 0], frame[0, 1], frame[0, 2]
+    dirx, diry, dirz = frame[1, 0], frame[1, 1], frame[1, 2]
+    ru, rd = _block_start(j0, phys, x1, sin, sout, work, buf, TANGENT)
+    inv_mass, mass, charge = nodes.inv_mass, nodes.mass, nodes.charge
+    fo, eo = sout.f, sout.e
+    rf = ROW_FORCE
+    # arrays indexed directly with unsigned indices, no row views (_tensions says why)
     for j in range(j0, j1):
-        _row_force(j, arr, mat, uni, sourced, grav, x1, buf, tu, td, TANGENT)
+        seg_stats = _row_force(j, arr, mat, uni, sourced, grav, x1, buf, ru, rd,
+                               TANGENT | STATS)
         nb = nodes.rows[j, ROW_NODE]
         nx = nodes.rows[j, ROW_COUNT]
-        e = nb + nx
-        im = nodes.inv_mass[nb:e]
-        m = nodes.mass[nb:e]
-        q = nodes.charge[nb:e]
         # the Gershgorin bound: 2 Σ k_t/m over the node's four segments
-        ku, kd = tu[3], td[3]
+        rku, rkd = ru + 3, rd + 3
         worst = 0.0
         for i in range(nx):
-            worst = max(worst, 2.0 * ((kw[i] + kw[i + 1]) + (ku[i] + kd[i])) * im[i])
+            u = uint64(i)
+            worst = max(worst, 2.0 * ((buf[RKW, u] + buf[RKW, u + uint64(1)])
+                                      + (buf[rku, u] + buf[rkd, u])) * inv_mass[uint64(nb + i)])
         sums[SUM_STIFFNESS, j] = worst
         # the work of the force over the placement of the candidates (central_step)
         proj = 0.0
@@ -600,41 +724,114 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
             n = nb + i
             if flag[n] != 0:
                 for c in range(3):
-                    proj += f[c, i] * (x1[c, n] - xbuf[c, n] - half * (v1[c, n] - v_pre[c, n]))
+                    proj += buf[rf + c, i] * (x1[c, n] - xbuf[c, n]
+                                              - half * (v1[c, n] - v_pre[c, n]))
         sums[SUM_PROJECTION, j] = proj
-        px, py, pz = x1[0, nb:e], x1[1, nb:e], x1[2, nb:e]
-        vx, vy, vz = v1[0, nb:e], v1[1, nb:e], v1[2, nb:e]
-        _rotate_row(nb, nx, nodes.inv_mass, nodes.charge, uni, sourced, nf, (px, py, pz), half,
-                    (vx, vy, vz), buf)
-        fx, fy, fz = f[0], f[1], f[2]
-        gx, gy, gz = sout.f[0, nb:e], sout.f[1, nb:e], sout.f[2, nb:e]
-        ex, ey, ez = sout.e[0, nb:e], sout.e[1, nb:e], sout.e[2, nb:e]
+        _rotate_row(nb, nx, inv_mass, charge, uni, sourced, nf, x1, half, v1, (0, nb), buf)
         for i in range(nx):
-            ee, b = node_field_of(uni, sourced, nf, nb + i, (px[i], py[i], pz[i]))
-            k = half * im[i]
-            nvx = vx[i] + k * fx[i]
-            nvy = vy[i] + k * fy[i]
-            nvz = vz[i] + k * fz[i]
-            bx = 0.5 * (vx[i] + nvx)
-            by = 0.5 * (vy[i] + nvy)
-            bz = 0.5 * (vz[i] + nvz)
-            wfield[i] = half * q[i] * ((ee[0] * bx + ee[1] * by) + ee[2] * bz)
-            wgrav[i] = half * m[i] * ((grav[0] * bx + grav[1] * by) + grav[2] * bz)
-            speed2[i] = (nvx * nvx + nvy * nvy) + nvz * nvz
-            vx[i] = nvx
-            vy[i] = nvy
-            vz[i] = nvz
-            fm = magnetic_force(q[i], (nvx, nvy, nvz), b)
-            gx[i] = fx[i] + fm[0]
-            gy[i] = fy[i] + fm[1]
-            gz[i] = fz[i] + fm[2]
-            ex[i] = ee[0]
-            ey[i] = ee[1]
-            ez[i] = ee[2]
-        sums[SUM_WORK_FIELD, j] = _row_total(wfield, nx)
-        sums[SUM_WORK_GRAVITY, j] = _row_total(wgrav, nx)
-        sums[SUM_SPEED, j] = _row_total(speed2, nx)
-        tu, td = td, tu
+            u = uint64(i)
+            k = uint64(nb + i)
+            ee, b = node_field_of(uni, sourced, nf, nb + i, (x1[0, k], x1[1, k], x1[2, k]))
+            hk = half * inv_mass[k]
+            vx, vy, vz = v1[0, k], v1[1, k], v1[2, k]
+            fx, fy, fz = buf[rf, u], buf[rf + 1, u], buf[rf + 2, u]
+            nvx = vx + hk * fx
+            nvy = vy + hk * fy
+            nvz = vz + hk * fz
+            bx = 0.5 * (vx + nvx)
+            by = 0.5 * (vy + nvy)
+            bz = 0.5 * (vz + nvz)
+            buf[ROW_INV_DENOM, u] = half * charge[k] * ((ee[0] * bx + ee[1] * by) + ee[2] * bz)
+            buf[ROW_DT_OVER_MASS, u] = half * mass[k] * ((grav[0] * bx + grav[1] * by)
+                                                         + grav[2] * bz)
+            buf[ROW_VEL_EXPLICIT, u] = (nvx * nvx + nvy * nvy) + nvz * nvz
+            v1[0, k] = nvx
+            v1[1, k] = nvy
+            v1[2, k] = nvz
+            fm = magnetic_force(charge[k], (nvx, nvy, nvz), b)
+            fo[0, k] = fx + fm[0]
+            fo[1, k] = fy + fm[1]
+            fo[2, k] = fz + fm[2]
+            eo[0, k] = ee[0]
+            eo[1, k] = ee[1]
+            eo[2, k] = ee[2]
+        sums[SUM_WORK_FIELD, j] = _buf_total(buf, ROW_INV_DENOM, nx)
+        sums[SUM_WORK_GRAVITY, j] = _buf_total(buf, ROW_DT_OVER_MASS, nx)
+        sums[SUM_SPEED, j] = _buf_total(buf, ROW_VEL_EXPLICIT, nx)
+        _node_stats(nb, nx, mass, x1, v1, zref, (cx, cy, cz, dirx, diry, dirz), buf, sums, j)
+        sums[SUM_DIAG + DIAG_STRETCH, j] = seg_stats[0]
+        sums[SUM_DIAG + DIAG_STRAIN, j] = seg_stats[1]
+        sums[SUM_DIAG + DIAG_BROKEN, j] = seg_stats[2]
+        sums[SUM_DIAG + DIAG_MIN_ALPHA, j] = seg_stats[3]
+        ru, rd = rd, ru
+
+
+@njit(cache=True, inline="always")
+def _node_stats(nb, count, mass, x, v, xref, frame, buf, sums, j):
+    """The fabric diagnostics' share of `count` nodes from node nb (mass, positions x,
+    velocities v, |v|² in buf[ROW_VEL_EXPLICIT]) into sums[SUM_DIAG + DIAG_*, j]: kinetic
+    energy, momentum and angular momentum about the origin (sums in _row_total's order),
+    largest |z − z_ref| (xref: the reference positions), the extent along the flight
+    direction from the body centre and the fastest speeds against and along it (frame:
+    centre, then direction); diagnostics.fabric_diagnostics's terms. Then, into
+    sums[SUM_MOTION:SUM_MOTION + 7, j], the largest |v|² and the smallest and largest of
+    each velocity component (the no-tunnelling limit's). Unsigned indices, no views."""
+    cx, cy, cz, dx, dy, dz = frame
+    rd = ROW_DIAG
+    for i in range(count):
+        u = uint64(i)
+        k = uint64(nb + i)
+        mi = mass[k]
+        vx, vy, vz = v[0, k], v[1, k], v[2, k]
+        px, py, pz = x[0, k], x[1, k], x[2, k]
+        buf[rd, u] = 0.5 * mi * buf[ROW_VEL_EXPLICIT, u]
+        buf[rd + 1, u] = mi * vx
+        buf[rd + 2, u] = mi * vy
+        buf[rd + 3, u] = mi * vz
+        buf[rd + 4, u] = mi * (py * vz - pz * vy)
+        buf[rd + 5, u] = mi * (pz * vx - px * vz)
+        buf[rd + 6, u] = mi * (px * vy - py * vx)
+    defl = 0.0
+    ahead_min = math.inf
+    ahead_max = -math.inf
+    approach = -math.inf
+    recede = -math.inf
+    fastest = 0.0
+    lox = loy = loz = math.inf
+    hix = hiy = hiz = -math.inf
+    for i in range(count):
+        k = uint64(nb + i)
+        vx, vy, vz = v[0, k], v[1, k], v[2, k]
+        defl = max(defl, abs(x[2, k] - xref[2, k]))
+        s = (x[0, k] - cx) * dx + (x[1, k] - cy) * dy + (x[2, k] - cz) * dz
+        ahead_min = min(ahead_min, s)
+        ahead_max = max(ahead_max, s)
+        vd = vx * dx + vy * dy + vz * dz
+        approach = max(approach, -vd)
+        recede = max(recede, vd)
+        fastest = max(fastest, buf[ROW_VEL_EXPLICIT, uint64(i)])
+        lox = min(lox, vx)
+        loy = min(loy, vy)
+        loz = min(loz, vz)
+        hix = max(hix, vx)
+        hiy = max(hiy, vy)
+        hiz = max(hiz, vz)
+    d = SUM_DIAG
+    for c in range(7):
+        sums[d + DIAG_KE + c, j] = _buf_total(buf, rd + c, count)
+    sums[d + DIAG_DEFLECTION, j] = defl
+    sums[d + DIAG_AHEAD_MIN, j] = ahead_min
+    sums[d + DIAG_AHEAD_MAX, j] = ahead_max
+    sums[d + DIAG_APPROACH_MAX, j] = approach
+    sums[d + DIAG_RECEDE_MAX, j] = recede
+    m = SUM_MOTION
+    sums[m, j] = fastest
+    sums[m + 1, j] = lox
+    sums[m + 2, j] = loy
+    sums[m + 3, j] = loz
+    sums[m + 4, j] = hix
+    sums[m + 5, j] = hiy
+    sums[m + 6, j] = hiz
 
 
 @njit(cache=True)

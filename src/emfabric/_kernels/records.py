@@ -342,7 +342,7 @@ class RowRecords(NamedTuple):
 class RowArrays(NamedTuple):
     """The arrays the per-row force (nodes._row_force) reads, built once per row block: a
     function bound to a record references and releases every array in it (atomic operations),
-    so the per-row code gets these nine and not Physics's records (nodes._rotate_row)."""
+    so the per-row code gets these ten and not Physics's records (nodes._rotate_row)."""
 
     rows: np.ndarray
     """Nodes.rows."""
@@ -350,6 +350,8 @@ class RowArrays(NamedTuple):
     charge: np.ndarray
     inv_rest2: np.ndarray
     """Yarns.inv_rest2."""
+    rest_length: np.ndarray
+    """Yarns.rest_length."""
     stiffness: np.ndarray
     alpha: np.ndarray
     """The committed α (the step's start state)."""
@@ -393,6 +395,15 @@ class StateArrays(NamedTuple):
     contact.SLIDE)."""
 
 
+# the fabric diagnostics of a state (diagnostics.fabric_diagnostics), in this order: kinetic
+# energy, momentum, angular momentum about the origin, max |Δz|, max stretch, strain energy,
+# broken yarns, min α, the nodes' extent along the flight direction from the body centre, the
+# fastest node speeds against and along it
+(DIAG_KE, DIAG_PX, DIAG_PY, DIAG_PZ, DIAG_LX, DIAG_LY, DIAG_LZ, DIAG_DEFLECTION, DIAG_STRETCH,
+ DIAG_STRAIN, DIAG_BROKEN, DIAG_MIN_ALPHA, DIAG_AHEAD_MIN, DIAG_AHEAD_MAX, DIAG_APPROACH_MAX,
+ DIAG_RECEDE_MAX) = range(16)
+DIAG_COUNT = 16
+
 # rows of Work.row_sums, one value per grid row, summed in a fixed order by the step kernels
 SUM_ERROR_NUM = 0
 """φ-scheme: Σ |x_K − x_{K−1}| of the row's nodes out of contact (eq. 3.10)."""
@@ -408,7 +419,16 @@ SUM_SPEED = 5
 """Central differences: Σ |v|² [m²/s²] (finite unless the step blew up)."""
 SUM_STIFFNESS = 6
 """Central differences: the largest 2 Σ k_t/m of the row's nodes [s⁻²] (Gershgorin)."""
-SUM_ROWS = 7
+SUM_DIAG = 7
+"""Central differences: the row's share of the fabric diagnostics of the step's end state,
+DIAG_COUNT rows in the order of diagnostics.fabric_diagnostics's results (sums, or the
+largest or smallest value; the stretch row holds U²: its row of the warp segments and of the
+fill segments to the next row), reduced by diagnostics.fabric_from_rows."""
+SUM_MOTION = SUM_DIAG + DIAG_COUNT
+"""Central differences: the row's largest |v|², then the smallest and the largest of each
+velocity component (7 rows; the no-tunnelling limit's, contact.travel_limit)."""
+MOTION_COUNT = 7
+SUM_ROWS = SUM_MOTION + MOTION_COUNT
 
 
 class Work(NamedTuple):
@@ -482,6 +502,12 @@ class Work(NamedTuple):
     """The same at the start of the step (the energy bookkeeping's), (3, node_count)."""
     ply_normals: np.ndarray
     """Every ply's surface normal at its nodes (plies._normals), (3, node_count)."""
+    frame: np.ndarray
+    """The fabric diagnostics' frame, (2, 3): the body centre at the end of the step (zeros
+    without a body) and the flight direction (set by the integrator)."""
+    diag: np.ndarray
+    """Central differences: the fabric diagnostics of the last attempt's end state,
+    (DIAG_COUNT,) in diagnostics.fabric_diagnostics's order."""
 
 
 def pack_tables(grids) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -530,4 +556,4 @@ def make_work(node_count: int, row_count: int, seg_total: int, seg_count: int = 
                 np.zeros(seg_total), np.full(seg_total, np.nan), np.zeros((7, 3)),
                 np.zeros((2, 3, n if plies > 1 else 1), dtype=np.int64),
                 np.zeros((3, n if plies > 1 else 1)), np.zeros((3, n if plies > 1 else 1)),
-                np.zeros((3, n if plies > 1 else 1)))
+                np.zeros((3, n if plies > 1 else 1)), np.zeros((2, 3)), np.zeros(DIAG_COUNT))

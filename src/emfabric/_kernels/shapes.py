@@ -213,9 +213,11 @@ def nodes_inside(x, inv_mass, flag, body, b_state):
     count = 0
     centre = b_state[BODY_X]
     rot = b_state[BODY_R0:BODY_R0 + 3]
+    r2 = bounding_radius(body) ** 2
     for n in range(x.shape[1]):
         if flag[n] == 0 and inv_mass[n] > 0.0:
             d = (x[0, n] - centre[0], x[1, n] - centre[1], x[2, n] - centre[2])
-            if is_inside(body, rot, d):
+            # outside the bounding sphere is outside the body: the shape's test only within
+            if d[0] * d[0] + d[1] * d[1] + d[2] * d[2] <= r2 and is_inside(body, rot, d):
                 count += 1
     return count

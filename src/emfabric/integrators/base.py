@@ -110,6 +110,12 @@ class IntegratorBase(ABC):
     def step(self, s_in: State, s_out: State, *, dt_limit: float = math.inf) -> StepInfo:
         """Advance s_in by one accepted step into s_out (s_in untouched), at most dt_limit."""
 
+    def fabric_of(self, state: State) -> np.ndarray | None:
+        """The fabric diagnostics of `state` (diagnostics.fabric_diagnostics's values) where
+        the step that wrote it computed them on the way, else None (the history record then
+        computes them). Valid until the next step."""
+        return None
+
     def variant(self, threaded: bool | None = None) -> str:
         """Name of the compiled step kernels this integrator runs (or would run threaded)."""
         return self.name + self.switch_suffix()

@@ -60,7 +60,10 @@ class CentralDifference(IntegratorBase):
         self.work = make_work(model.node_count, model.ny, model.seg_count,
                               model.seg_count if model.physics.contact.segments else 0,
                               model.ply_count)
+        self.work.frame[1] = model.flight_direction
         self.scratch = np.empty(model.node_count)
+        self._measured: State | None = None  # the state work.diag belongs to
+        self._measured_steps = -1
         self._step = Direct(central_step)
         self._stable = Direct(stable_step)
         self._travel = Direct(travel_step)
@@ -74,13 +77,22 @@ class CentralDifference(IntegratorBase):
         return central_step, (self.physics, s_in.arrays, s_out.arrays, self.work, None, threads,
                               *self.switches, s_in.t, 1e-9, ROTATION_TOLERANCE, s_out.energy)
 
-    def stable_dt(self, state: State, crit: float | None = None) -> float:
-        """The step central differences take from this state [s] (before dt_limit); crit: the
-        stability limit if known (the step kernel computes it at its end state), else
-        explicit.stable_step."""
+    def fabric_of(self, state: State) -> np.ndarray | None:
+        """The step kernel's fabric diagnostics of the state the last step wrote (its kick
+        reduces them on the way: the record needs no pass of its own); None for another."""
+        if state is self._measured and state.steps == self._measured_steps:
+            return self.work.diag
+        return None
+
+    def stable_dt(self, state: State, crit: float | None = None,
+                  travel: float | None = None) -> float:
+        """The step central differences take from this state [s] (before dt_limit); crit and
+        travel: the stability and no-tunnelling limits if known (the step kernel computes both
+        at its end state), else explicit.stable_step and contact.travel_step."""
         if crit is None:
             crit = self._stable(None, self.physics, state.node_x, state.seg_alpha, self.scratch)
-        travel = self._travel(None, self.physics, state.node_x, state.node_v, state.body)
+        if travel is None:
+            travel = self._travel(None, self.physics, state.node_x, state.node_v, state.body)
         return min(self.courant * crit, travel, self.dt_max)
 
     def step(self, s_in: State, s_out: State, *, dt_limit: float = math.inf) -> StepInfo:
@@ -88,6 +100,7 @@ class CentralDifference(IntegratorBase):
         previous step computed for this state (State.dt; also in a checkpoint), or computed here
         for the initial state."""
         self._before_step()
+        self._measured = None
         clock = time.perf_counter()
         step = s_in.dt if s_in.steps > 0 else self.stable_dt(s_in)
         if step < self.dt_min:
@@ -98,7 +111,7 @@ class CentralDifference(IntegratorBase):
         rejected = 0
         s_out.energy[:] = s_in.energy
         while True:
-            status, nc, crit = self._step(self.threaded, self.physics, s_in.arrays,
+            status, nc, crit, travel = self._step(self.threaded, self.physics, s_in.arrays,
                                           s_out.arrays, self.work, *self.kernel_buffers,
                                           *self.switches, s_in.t, dt, ROTATION_TOLERANCE,
                                           s_out.energy)
@@ -127,7 +140,8 @@ class CentralDifference(IntegratorBase):
         s_out.contact_count = nc
         s_out.contact_steps = s_in.contact_steps + (1 if nc > 0 else 0)
         s_out.contact_force[:] = self.work.reaction[0] / dt
-        s_out.dt = self.stable_dt(s_out, crit)
+        s_out.dt = self.stable_dt(s_out, crit, travel)
+        self._measured, self._measured_steps = s_out, s_out.steps
         self._after_step(time.perf_counter() - clock)
         return StepInfo(t=s_out.t, dt=dt, iterations=1, error=0.0, rejected=rejected,
                         evaluations=1 + rejected, contacts=nc)

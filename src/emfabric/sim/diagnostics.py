@@ -7,15 +7,20 @@ module fills; it computes nothing.
 
 from __future__ import annotations
 
+import math
 import weakref
 from typing import NamedTuple
 
 import numpy as np
 
 from emfabric._kernels import diagnostics as _k
+from emfabric._kernels.fields import fields_at_points
 from emfabric._kernels.records import (
+    COL_BALANCE,
+    COL_DEFLECTION,
     COL_FIELD_B,
     COL_FIELD_E,
+    COL_STRETCH,
     ENERGY_WORK_FIELD,
     ENERGY_WORK_GRAVITY,
     HISTORY_COLUMN,
@@ -133,22 +138,33 @@ _DIRECT: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 """Per Model: its diagnostics kernels called without the per-call type dispatch (fastcall)."""
 
 
-def _record(model: Model, state: State, row: np.ndarray,
-            e_initial: float) -> tuple[FabricDiagnostics, float]:
+def _record(model: Model, state: State, row: np.ndarray, e_initial: float,
+            fabric: np.ndarray | None = None) -> tuple[FabricDiagnostics, float]:
     direct = _DIRECT.get(model)
     if direct is None:
-        direct = _DIRECT[model] = (Direct(_k.fabric_diagnostics), Direct(_k.history_row))
-    out = np.empty(_k.COUNT)
+        direct = _DIRECT[model] = (Direct(_k.fabric_diagnostics), Direct(_k.history_row),
+                                   Direct(fields_at_points),
+                                   tuple(np.empty((1, 3)) for _ in range(3)))
     centre = state.body_x if model.has_body else np.zeros(3)
-    direct[0](None, model.physics, state.node_x, state.node_v, state.seg_alpha, centre,
-              model.flight_direction, out)
+    if fabric is None:
+        out = np.empty(_k.COUNT)
+        direct[0](None, model.physics, state.node_x, state.node_v, state.seg_alpha, centre,
+                  model.flight_direction, out)
+    else:
+        out = fabric
     step = StepStats(float(state.t), float(state.last_dt), int(state.iterations),
                      float(state.error), int(state.rejected), int(state.evaluations),
                      int(state.contact_count))
     e0 = direct[1](None, step, state.body, model.body, out, state.energy, float(e_initial),
                    state.contact_force, row)
     # the applied field where the projectile is: when a pulse rises, how strong it got
-    e, b = fields_at(model.field, centre.reshape(1, 3), state.t)
+    fld = model.field
+    if (fld.grid_values is None or fld.grid_values.shape[0] == 0) and fld.magnets.shape[0]:
+        e, b = fields_at(fld, centre.reshape(1, 3), state.t)  # magnets without a grid
+    else:  # sources.evaluate.fields_at's kernel, without its dispatch and allocations
+        pts, e, b = direct[3]
+        pts[0] = centre
+        direct[2](None, fld, pts, float(state.t), e, b)
     row[COL_FIELD_B:COL_FIELD_B + 3] = b[0]
     row[COL_FIELD_E:COL_FIELD_E + 3] = e[0]
     _per_ply(model, state, row)
@@ -176,10 +192,13 @@ def _per_ply(model: Model, state: State, row: np.ndarray) -> None:
 
 
 
-def measure(model: Model, state: State, row: np.ndarray) -> FabricDiagnostics:
+def measure(model: Model, state: State, row: np.ndarray,
+            fabric: np.ndarray | None = None) -> FabricDiagnostics:
     """Fill `row` (row_width(model.ply_count) columns) with the history record of `state` (the
-    order of RECORD, then PLY_RECORD) and return the fabric diagnostics it was made from."""
-    return _record(model, state, row, state.energy_initial)[0]
+    order of RECORD, then PLY_RECORD) and return the fabric diagnostics it was made from.
+    fabric: those diagnostics (the kernel's order) where the step that wrote the state
+    computed them (the integrator's fabric_of), else they are computed here."""
+    return _record(model, state, row, state.energy_initial, fabric)[0]
 
 
 def held_nodes(model: Model, alpha: np.ndarray) -> np.ndarray:
@@ -300,28 +319,31 @@ def limits(model: Model) -> Limits:
 def check_plausible(model: Model, state: State, row: np.ndarray, lim: Limits) -> str | None:
     """Why the state just recorded is not physical (non-finite values, an energy balance error
     beyond ENERGY_BALANCE_FRACTION of the energy put in, motion beyond the limits), else None."""
-    bad = ~np.isfinite(row)
-    if bad.any():
-        names = [n for n, (w, _u, _l) in RECORD.items() if bad[LAYOUT[n]].any()]
-        return f"non-finite values in {', '.join(names[:4])}"
-    energy_in = (abs(state.energy_initial) + abs(float(state.energy[ENERGY_WORK_FIELD]))
-                 + abs(float(state.energy[ENERGY_WORK_GRAVITY])) + ENERGY_FLOOR)
-    balance = float(row[LAYOUT["energy_balance_error"]][0])
+    # called every step: a non-finite sum first (every value finite then), plain floats after
+    if not math.isfinite(float(row.sum())):
+        bad = ~np.isfinite(row)
+        if bad.any():
+            names = [n for n, (w, _u, _l) in RECORD.items() if bad[LAYOUT[n]].any()]
+            return f"non-finite values in {', '.join(names[:4])}"
+    energy = state.energy
+    energy_in = (abs(state.energy_initial) + abs(energy.item(ENERGY_WORK_FIELD))
+                 + abs(energy.item(ENERGY_WORK_GRAVITY)) + ENERGY_FLOOR)
+    balance = row.item(COL_BALANCE)
     if abs(balance) > ENERGY_BALANCE_FRACTION * energy_in:
         return (f"energy balance error {balance:.3g} J exceeds "
                 f"{ENERGY_BALANCE_FRACTION:.0%} of the energy put in ({energy_in:.3g} J)")
     if model.has_body:
-        v = float(np.linalg.norm(state.body_v))
-        x = float(np.linalg.norm(state.body_x))
+        v = math.hypot(*state.body_v.tolist())
+        x = math.hypot(*state.body_x.tolist())
         if v > lim.speed:
             return f"projectile speed {v:.3g} m/s beyond the plausible {lim.speed:.3g} m/s"
         if x > lim.distance:
             return (f"projectile {x:.3g} m from the origin, beyond the plausible "
                     f"{lim.distance:.3g} m")
-    defl = float(row[LAYOUT["max_deflection"]][0])
+    defl = row.item(COL_DEFLECTION)
     if defl > lim.distance:
         return f"fabric deflection {defl:.3g} m beyond the plausible {lim.distance:.3g} m"
-    stretch = float(row[LAYOUT["max_stretch"]][0])
+    stretch = row.item(COL_STRETCH)
     if stretch > STRETCH_LIMIT:
         return f"yarn stretch U = {stretch:.3g} beyond the plausible {STRETCH_LIMIT:g}"
     return None
