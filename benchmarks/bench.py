@@ -334,7 +334,8 @@ def print_gpu(info: dict, rows: list[dict]) -> None:
 def print_evaluations(rows: list[dict], threads: list[int], warp_note: str,
                       bandwidth: dict[int, float]) -> None:
     say("(a) one force evaluation + node update on a dented, moving sheet: the φ-scheme's "
-        "fabric_iterate, and central differences' kick_rows (force, magnetic rotation, kick)")
+        "fabric_iterate, and central differences' kick_rows (force, magnetic rotation, kick, "
+        "and the history record's fabric diagnostics)")
     say(f"    state: reference grid + centre dent {BUMP_DEPTH * 1e3:g} mm deep over r < "
         f"{BUMP_RADIUS * 1e3:g} mm, v_z up to {BUMP_SPEED:g} m/s, Δt = {DT:g} s")
     say("    times: best (median) of the samples; emfabric called in a compiled loop")

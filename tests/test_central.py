@@ -281,8 +281,21 @@ def test_history_diagnostics_from_the_kick_equal_a_separate_pass(threads):
     enough to break yarns (brittle KM2), with a field."""
     from emfabric._kernels.contact import travel_step
     from emfabric._kernels.diagnostics import (
-        AHEAD_MAX, AHEAD_MIN, APPROACH_MAX, BROKEN, COUNT, DEFLECTION, KE, LX, MIN_ALPHA, PX,
-        RECEDE_MAX, STRAIN, STRETCH, fabric_diagnostics)
+        AHEAD_MAX,
+        AHEAD_MIN,
+        APPROACH_MAX,
+        BROKEN,
+        COUNT,
+        DEFLECTION,
+        KE,
+        LX,
+        MIN_ALPHA,
+        PX,
+        RECEDE_MAX,
+        STRAIN,
+        STRETCH,
+        fabric_diagnostics,
+    )
     from emfabric._kernels.explicit import _travel_from_rows
 
     sc = load_scenario("pack-fsp", {"fabric.plies": 2, "fabric.nodes": [21, 21],

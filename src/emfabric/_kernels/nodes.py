@@ -20,7 +20,7 @@ the same arithmetic.
 
 import math
 
-from numba import njit, prange, uint64
+from numba import int64, njit, prange, uint64
 
 from emfabric._kernels.fields import magnetic_force, node_field_of, uniform_field
 from emfabric._kernels.materials import (
@@ -270,7 +270,7 @@ def _block_start(j0, phys, prev, sin, sout, work, buf, mode):
         a = rows[j0 - 1, ROW_NODE]
         nx = rows[j0 - 1, ROW_COUNT]
         _tensions(prev, (a, nx, s, nx), yarns.inv_rest2[s], 0.0, sin.alpha, sout.alpha,
-                  work.damage_thr, yarns.stiffness, mat, buf, (ROW_FILL_DOWN, 0),
+                  work.damage_thr, yarns.stiffness, mat, buf, (int64(ROW_FILL_DOWN), int64(0)),
                   mode & TANGENT)
     else:
         buf[ROW_FILL_DOWN:ROW_FILL_DOWN + 4] = 0.0
@@ -303,12 +303,15 @@ def _row_force(j, arr, mat, uni, sourced, grav, prev, buf, ru, rd, mode):
     # padded warp rows: column i + 1 is the tension of segment (i, i + 1), zeros at both ends
     for c in range(4):
         buf[ROW_WARP_TENSION + c, nx] = 0.0
-    sw = _tensions(prev, (nb, 1, sb, nx - 1), inv_rest2[sb], rest[sb] ** 2, alpha_c, alpha_t,
-                   damage_thr, coef, mat, buf, (ROW_WARP_TENSION, 1), mode | ALPHA)
+    # (int64(): a constant in a tuple is typed as a literal, and each literal would compile
+    # _tensions again)
+    sw = _tensions(prev, (nb, int64(1), sb, nx - 1), inv_rest2[sb], rest[sb] ** 2, alpha_c,
+                   alpha_t, damage_thr, coef, mat, buf, (int64(ROW_WARP_TENSION), int64(1)),
+                   mode | ALPHA)
     sfl = NO_STATS
     if sf >= 0:
         sfl = _tensions(prev, (nb, nx, sf, nx), inv_rest2[sf], rest[sf] ** 2, alpha_c,
-                        alpha_t, damage_thr, coef, mat, buf, (ru, 0), mode | ALPHA)
+                        alpha_t, damage_thr, coef, mat, buf, (ru, int64(0)), mode | ALPHA)
     else:
         # the ply's last row: no fill above it (the whole width, so that the first row of the
         # next ply finds no tension from below)
