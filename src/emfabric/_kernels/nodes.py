@@ -354,80 +354,72 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
     skip_err = work.flag
     err_num, err_den = work.err_num, work.err_den
     inv_mass, charge = nodes.inv_mass, nodes.charge
-    xx, xy, xz = prev[0], prev[1], prev[2]
     ru, rd = _block_start(j0, phys, prev, sin, sout, work, buf, 0)
-    f = buf[ROW_FORCE:ROW_FORCE + 3]
-    acc = buf[ROW_VEL_EXPLICIT:ROW_VEL_EXPLICIT + 3]
-    uu = buf[ROW_ROTATION:ROW_ROTATION + 3]
-    a_dot_u = buf[ROW_PROJECTION]
-    inv = buf[ROW_INV_DENOM]
-    dt_over_m = buf[ROW_DT_OVER_MASS]
+    rf, ra, rr = ROW_FORCE, ROW_VEL_EXPLICIT, ROW_ROTATION
+    # arrays indexed directly with unsigned indices, no row views (_tensions says why)
     for j in range(j0, j1):
         _row_force(j, arr, mat, uni, sourced, grav, prev, buf, ru, rd, 0)
         nb = nodes.rows[j, ROW_NODE]
         nx = nodes.rows[j, ROW_COUNT]
-        e = nb + nx
-        im = inv_mass[nb:e]
-        q = charge[nb:e]
-        px, py, pz = xx[nb:e], xy[nb:e], xz[nb:e]
         for i in range(nx):
-            dt_over_m[i] = dt * im[i]
+            buf[ROW_DT_OVER_MASS, uint64(i)] = dt * inv_mass[uint64(nb + i)]
         for c in range(3):
-            fc = f[c]
-            ac = acc[c]
-            v0c = v0[c, nb:e]
-            f0c = f0[c, nb:e]
             for i in range(nx):
-                ac[i] = v0c[i] + dt_over_m[i] * (phi * fc[i] + (1.0 - phi) * f0c[i])
+                u = uint64(i)
+                k = uint64(nb + i)
+                buf[ra + c, u] = v0[c, k] + buf[ROW_DT_OVER_MASS, u] * (
+                    phi * buf[rf + c, u] + (1.0 - phi) * f0[c, k])
         # magnetic part implicit in v1: v1 − v1 × u = a with u = φΔt q B / m (solved exactly)
-        ux, uy, uz = uu[0], uu[1], uu[2]
-        ax, ay, az = acc[0], acc[1], acc[2]
         for i in range(nx):
-            _fe, fb = node_field_of(uni, sourced, node_fields, nb + i, (px[i], py[i], pz[i]))
-            beta = phi * dt_over_m[i] * q[i]
-            ux[i] = beta * fb[0]
-            uy[i] = beta * fb[1]
-            uz[i] = beta * fb[2]
+            u = uint64(i)
+            k = uint64(nb + i)
+            _fe, fb = node_field_of(uni, sourced, node_fields, nb + i,
+                                    (prev[0, k], prev[1, k], prev[2, k]))
+            beta = phi * buf[ROW_DT_OVER_MASS, u] * charge[k]
+            buf[rr, u] = beta * fb[0]
+            buf[rr + 1, u] = beta * fb[1]
+            buf[rr + 2, u] = beta * fb[2]
         for i in range(nx):
-            a_dot_u[i] = ax[i] * ux[i] + ay[i] * uy[i] + az[i] * uz[i]
-            inv[i] = 1.0 / (1.0 + ux[i] * ux[i] + uy[i] * uy[i] + uz[i] * uz[i])
-        vx, vy, vz = v1[0, nb:e], v1[1, nb:e], v1[2, nb:e]
+            u = uint64(i)
+            ax, ay, az = buf[ra, u], buf[ra + 1, u], buf[ra + 2, u]
+            ux, uy, uz = buf[rr, u], buf[rr + 1, u], buf[rr + 2, u]
+            buf[ROW_PROJECTION, u] = ax * ux + ay * uy + az * uz
+            buf[ROW_INV_DENOM, u] = 1.0 / (1.0 + ux * ux + uy * uy + uz * uz)
         for i in range(nx):
-            vx[i] = (ax[i] + (ay[i] * uz[i] - az[i] * uy[i]) + a_dot_u[i] * ux[i]) * inv[i]
-            vy[i] = (ay[i] + (az[i] * ux[i] - ax[i] * uz[i]) + a_dot_u[i] * uy[i]) * inv[i]
-            vz[i] = (az[i] + (ax[i] * uy[i] - ay[i] * ux[i]) + a_dot_u[i] * uz[i]) * inv[i]
-        fx, fy, fz = f[0], f[1], f[2]
-        gx, gy, gz = f1[0, nb:e], f1[1, nb:e], f1[2, nb:e]
+            u = uint64(i)
+            k = uint64(nb + i)
+            ax, ay, az = buf[ra, u], buf[ra + 1, u], buf[ra + 2, u]
+            ux, uy, uz = buf[rr, u], buf[rr + 1, u], buf[rr + 2, u]
+            a_dot_u = buf[ROW_PROJECTION, u]
+            inv = buf[ROW_INV_DENOM, u]
+            v1[0, k] = (ax + (ay * uz - az * uy) + a_dot_u * ux) * inv
+            v1[1, k] = (ay + (az * ux - ax * uz) + a_dot_u * uy) * inv
+            v1[2, k] = (az + (ax * uy - ay * ux) + a_dot_u * uz) * inv
         for i in range(nx):
-            _fe, fb = node_field_of(uni, sourced, node_fields, nb + i, (px[i], py[i], pz[i]))
-            fm = magnetic_force(q[i], (vx[i], vy[i], vz[i]), fb)
-            gx[i] = fx[i] + fm[0]
-            gy[i] = fy[i] + fm[1]
-            gz[i] = fz[i] + fm[2]
+            u = uint64(i)
+            k = uint64(nb + i)
+            _fe, fb = node_field_of(uni, sourced, node_fields, nb + i,
+                                    (prev[0, k], prev[1, k], prev[2, k]))
+            fm = magnetic_force(charge[k], (v1[0, k], v1[1, k], v1[2, k]), fb)
+            f1[0, k] = buf[rf, u] + fm[0]
+            f1[1, k] = buf[rf + 1, u] + fm[1]
+            f1[2, k] = buf[rf + 2, u] + fm[2]
         for c in range(3):
-            x0c = x0[c, nb:e]
-            v0c = v0[c, nb:e]
-            v1c = v1[c, nb:e]
-            x1c = x1[c, nb:e]
             for i in range(nx):
-                x1c[i] = x0c[i] + dt * (phi * v1c[i] + (1.0 - phi) * v0c[i])
+                k = uint64(nb + i)
+                x1[c, k] = x0[c, k] + dt * (phi * v1[c, k] + (1.0 - phi) * v0[c, k])
         # error measure terms (3.10 step 5a); contact candidates are measured after contact
-        px, py, pz = x1[0, nb:e], x1[1, nb:e], x1[2, nb:e]
-        kx, ky, kz = xx[nb:e], xy[nb:e], xz[nb:e]
-        sx, sy, sz = x0[0, nb:e], x0[1, nb:e], x0[2, nb:e]
-        skip = skip_err[nb:e]
-        en = err_num[nb:e]
-        ed = err_den[nb:e]
         for i in range(nx):
-            keep = 1.0 if skip[i] == 0 else 0.0
-            dx = px[i] - kx[i]
-            dy = py[i] - ky[i]
-            dz = pz[i] - kz[i]
-            en[i] = keep * math.sqrt(dx * dx + dy * dy + dz * dz)
-            dx = px[i] - sx[i]
-            dy = py[i] - sy[i]
-            dz = pz[i] - sz[i]
-            ed[i] = keep * math.sqrt(dx * dx + dy * dy + dz * dz)
+            k = uint64(nb + i)
+            keep = 1.0 if skip_err[k] == 0 else 0.0
+            dx = x1[0, k] - prev[0, k]
+            dy = x1[1, k] - prev[1, k]
+            dz = x1[2, k] - prev[2, k]
+            err_num[k] = keep * math.sqrt(dx * dx + dy * dy + dz * dz)
+            dx = x1[0, k] - x0[0, k]
+            dy = x1[1, k] - x0[1, k]
+            dz = x1[2, k] - x0[2, k]
+            err_den[k] = keep * math.sqrt(dx * dx + dy * dy + dz * dz)
         ru, rd = rd, ru
 
 
