@@ -149,7 +149,7 @@ NO_STATS = (0.0, 0.0, 0.0, 1.0)
 def _segment_stats(buf, s, coef, rest2, mat, count):
     """The fabric diagnostics' share of `count` segments s + i with damage buf[ROW_STRESS] and
     stretch² buf[ROW_STRETCH_SQ] (diagnostics.fabric_diagnostics's terms): (max U² of those
-    not broken, strain energy Σ α stiffness L0² W(U²) in _row_total's order, broken count,
+    not broken, strain energy Σ α stiffness L0² W(U²) in _buf_total's order, broken count,
     min α); buf[ROW_SEGMENT_ENERGY]: scratch."""
     bb = mat.broken_below
     if mat.kind == MATERIAL_FUNG:
@@ -426,7 +426,6 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
 ROWS_PER_BLOCK = 16
 
 
-
 @njit(cache=True)
 def fused_iterate(phys, prev, sin, sout, work, t1, phi, dt, rowbuf):
     """Yarn tensions at the iterate `prev` and the φ-update of every node from the start state
@@ -584,7 +583,8 @@ def rodrigues(v, q_over_m, b, h):
 
 @njit(cache=True, inline="always")
 def _buf_total(buf, r, count):
-    """Σ buf[r, :count] in _row_total's order (unsigned indices: no view)."""
+    """Σ buf[r, :count] in a fixed order: four interleaved partial sums, as _row_sums (unsigned
+    indices: no view)."""
     s0 = s1 = s2 = s3 = 0.0
     i = 0
     while i + 3 < count:
@@ -596,23 +596,6 @@ def _buf_total(buf, r, count):
         i += 4
     while i < count:
         s0 += buf[r, uint64(i)]
-        i += 1
-    return (s0 + s1) + (s2 + s3)
-
-
-@njit(cache=True)
-def _row_total(a, count):
-    """Σ a[:count] in a fixed order (four interleaved partial sums, as _row_sums)."""
-    s0 = s1 = s2 = s3 = 0.0
-    i = 0
-    while i + 3 < count:
-        s0 += a[i]
-        s1 += a[i + 1]
-        s2 += a[i + 2]
-        s3 += a[i + 3]
-        i += 4
-    while i < count:
-        s0 += a[i]
         i += 1
     return (s0 + s1) + (s2 + s3)
 
@@ -765,7 +748,7 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
 def _node_stats(nb, count, mass, x, v, xref, frame, buf, sums, j):
     """The fabric diagnostics' share of `count` nodes from node nb (mass, positions x,
     velocities v, |v|² in buf[ROW_VEL_EXPLICIT]) into sums[SUM_DIAG + DIAG_*, j]: kinetic
-    energy, momentum and angular momentum about the origin (sums in _row_total's order),
+    energy, momentum and angular momentum about the origin (sums in _buf_total's order),
     largest |z − z_ref| (xref: the reference positions), the extent along the flight
     direction from the body centre and the fastest speeds against and along it (frame:
     centre, then direction); diagnostics.fabric_diagnostics's terms. Then, into
