@@ -185,21 +185,22 @@ def fabric_from_rows(sums, ny, out):
     leaves in the row sums (records.SUM_DIAG: sums, largest or smallest values per grid
     row), reduced over the ny rows in row order: the same values but for the sums' rounding
     (summed per row, then over rows), whatever the thread count."""
-    for k in range(COUNT):
-        r = sums[SUM_DIAG + k]
-        if k == STRETCH or k == DEFLECTION or k == AHEAD_MAX or k == APPROACH_MAX \
-                or k == RECEDE_MAX:
-            acc = 0.0 if k == STRETCH or k == DEFLECTION else -math.inf
-            for j in range(ny):
-                acc = max(acc, r[j])
-        elif k == MIN_ALPHA or k == AHEAD_MIN:
-            acc = 1.0 if k == MIN_ALPHA else math.inf
-            for j in range(ny):
-                acc = min(acc, r[j])
-        else:
-            acc = 0.0
-            for j in range(ny):
-                acc += r[j]
+    for k in (KE, PX, PY, PZ, LX, LY, LZ, STRAIN, BROKEN):
+        acc = 0.0
+        for j in range(ny):
+            acc += sums[SUM_DIAG + k, j]
+        out[k] = acc
+    # the largest and smallest values from fabric_diagnostics's starting values
+    for k, start in ((DEFLECTION, 0.0), (STRETCH, 0.0), (AHEAD_MAX, -math.inf),
+                     (APPROACH_MAX, -math.inf), (RECEDE_MAX, -math.inf)):
+        acc = start
+        for j in range(ny):
+            acc = max(acc, sums[SUM_DIAG + k, j])
+        out[k] = acc
+    for k, start in ((MIN_ALPHA, 1.0), (AHEAD_MIN, math.inf)):
+        acc = start
+        for j in range(ny):
+            acc = min(acc, sums[SUM_DIAG + k, j])
         out[k] = acc
     out[STRETCH] = math.sqrt(out[STRETCH])
 

@@ -277,13 +277,13 @@ def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol
     Returns (status, contacts, stable, travel): stable the explicit stability limit at the new
     state (stable_step's Gershgorin bound, from the force evaluation's tangent stiffnesses)
     [s]; travel its no-tunnelling limit (contact.travel_step's, from the kick's row sums) [s];
-    The fabric diagnostics of sout (diagnostics.fabric_diagnostics's values, their sums
-    rounded in row order) into work.diag, about the body centre of sout and the flight
-    direction in work.frame[1].
-
     status OK; NOT_FINITE (a non-finite value: Δt too large or the run
     diverged); CONTACT_MISSED (a free node ended inside the body without being a contact
-    candidate); BODY_NOT_CONVERGED (the mid-step rotation did not converge)."""
+    candidate); BODY_NOT_CONVERGED (the mid-step rotation did not converge).
+
+    The fabric diagnostics of sout (diagnostics.fabric_diagnostics's values, their sums
+    rounded in row order) go into work.diag, about the body centre of sout and the flight
+    direction in work.frame[1]."""
     nodes, body, fld = phys.nodes, phys.body, phys.field
     inv_mass = nodes.inv_mass
     b_in, b_out = sin.body, sout.body
