@@ -32,7 +32,7 @@ from emfabric.sim.fastcall import Direct
 from emfabric.sim.model import Model
 from emfabric.sim.reach import out_of_reach
 from emfabric.sim.state import State
-from emfabric.sources.evaluate import fields_at
+from emfabric.sources.evaluate import fields_at, magnets_outside_kernels
 
 ATTRIBUTES: dict[str, tuple[str, str]] = {
     "dt": ("s", "accepted time step"),
@@ -159,8 +159,8 @@ def _record(model: Model, state: State, row: np.ndarray, e_initial: float,
                    state.contact_force, row)
     # the applied field where the projectile is: when a pulse rises, how strong it got
     fld = model.field
-    if (fld.grid_values is None or fld.grid_values.shape[0] == 0) and fld.magnets.shape[0]:
-        e, b = fields_at(fld, centre.reshape(1, 3), state.t)  # magnets without a grid
+    if magnets_outside_kernels(fld):
+        e, b = fields_at(fld, centre.reshape(1, 3), state.t)
     else:  # sources.evaluate.fields_at's kernel, without its dispatch and allocations
         pts, e, b = direct[3]
         pts[0] = centre

@@ -22,6 +22,13 @@ def fields_at(fld: Field, points: Sequence[Sequence[float]], t: float = 0.0
     e = np.empty_like(pts)
     b = np.empty_like(pts)
     fields_at_points(fld, pts, float(t), e, b)
-    if (fld.grid_values is None or fld.grid_values.shape[0] == 0) and fld.magnets.shape[0]:
+    if magnets_outside_kernels(fld):
         b += magnet_fields(fld.magnets, pts)
     return e, b
+
+
+def magnets_outside_kernels(fld: Field) -> bool:
+    """Whether the record's magnets are not in its source grid (built from the scenario alone):
+    fields_at_points leaves them out and fields_at adds them from magpylib."""
+    return bool((fld.grid_values is None or fld.grid_values.shape[0] == 0)
+                and fld.magnets.shape[0])
