@@ -49,9 +49,21 @@ def write_netcdf(ds: xr.Dataset, path: str | Path, *, unlimited: str | None = No
         write_atomic(path, lambda tmp: ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4",
                                                    encoding=encoding))
     else:
-        write_atomic(path, lambda tmp: ds.to_netcdf(tmp, engine="netcdf4", format=APPENDABLE,
-                                                   encoding=encoding,
-                                                   unlimited_dims=[unlimited]))
+        # xarray writes the header and the first record; the other records are appended
+        # directly (xarray's own write of a record dimension goes variable by variable through
+        # the interleaved records with fill mode on: 1.1 s for a paper-field history.nc,
+        # 0.2 s this way, the same file as read back)
+        first = ds.isel({unlimited: slice(0, 1)})
+        rest = {name: var.values[1:] for name, var in ds.variables.items()
+                if var.dims[:1] == (unlimited,)}
+
+        def write(tmp: Path) -> None:
+            first.to_netcdf(tmp, engine="netcdf4", format=APPENDABLE, encoding=encoding,
+                            unlimited_dims=[unlimited])
+            if ds.sizes[unlimited] > 1:
+                append_records(tmp, unlimited, rest)
+
+        write_atomic(path, write)
 
 
 def append_records(path: str | Path, dim: str, records: dict[str, np.ndarray]) -> int:
@@ -60,6 +72,9 @@ def append_records(path: str | Path, dim: str, records: dict[str, np.ndarray]) -
     import netCDF4
 
     with netCDF4.Dataset(path, "a") as nc:
+        # no fill values written ahead of the data: a kill before the close leaves the record
+        # count in the header as it was, and the records beyond it unread
+        nc.set_fill_off()
         start = len(nc.dimensions[dim])
         count = 0
         for name, values in records.items():
