@@ -188,3 +188,38 @@ def test_netcdf_files_follow_cf_conventions(tmp_path):
         ds = xr.open_dataset(tmp_path / name)
         assert list(ds["xyz"].values) == ["x", "y", "z"]
         ds["projectile_velocity"].sel(xyz="z")
+
+
+@pytest.mark.parametrize("records", [0, 1, 2, 37])
+def test_record_files_read_back_as_xarray_writes_them(tmp_path, records):
+    """write_netcdf(..., unlimited=dim) writes the header and first record through xarray and
+    appends the rest directly: read back, the file is xarray's own write of the same dataset
+    (values, dtypes, attributes, the char `xyz` label, a non-index coordinate along the record
+    dimension), and the record dimension stays unlimited (appendable)."""
+    from emfabric.io.netcdf import append_records, write_netcdf, xyz_coordinate
+
+    rng = np.random.default_rng(3)
+    ds = xr.Dataset(
+        {"x": (("snapshot", "node", "xyz"), rng.normal(size=(records, 4, 3)),
+               {"units": "m", "long_name": "x"}),
+         "n": (("snapshot",), np.arange(records, dtype=np.int64), {"units": "1"}),
+         "fixed": (("node",), np.arange(4, dtype=np.int32), {"units": "1"})},
+        coords={"time": ("snapshot", np.linspace(0.0, 1.0, records), {"units": "s"}),
+                "xyz": xyz_coordinate()},
+        attrs={"title": "t", "count": np.int32(records)})
+    if records:
+        ds["x"][-1, 0, 0] = np.nan
+    write_netcdf(ds, tmp_path / "ours.nc", unlimited="snapshot")
+    ds.to_netcdf(tmp_path / "xarray.nc", engine="netcdf4", format="NETCDF3_64BIT_OFFSET",
+                 encoding={"xyz": {"dtype": "S1"}}, unlimited_dims=["snapshot"])
+    with xr.open_dataset(tmp_path / "ours.nc") as ours, \
+            xr.open_dataset(tmp_path / "xarray.nc") as theirs:
+        xr.testing.assert_identical(ours.load(), theirs.load())
+        assert ours.encoding["unlimited_dims"] == {"snapshot"}
+        for name in theirs.variables:
+            assert ours[name].encoding["dtype"] == theirs[name].encoding["dtype"], name
+    more = {"x": np.ones((2, 4, 3)), "n": np.array([7, 8]), "time": np.array([2.0, 3.0])}
+    assert append_records(tmp_path / "ours.nc", "snapshot", more) == records + 2
+    with xr.open_dataset(tmp_path / "ours.nc") as back:
+        assert back.sizes["snapshot"] == records + 2
+        assert (back["n"].values[-2:] == [7, 8]).all()
