@@ -58,3 +58,17 @@ def test_output_volume_is_refused_above_the_limit_unless_asked_for():
     build_model(sc.replace(**{"output.snapshot_interval": 1e-7, "output.size_limit": 1e13}))
     off = sc.replace(**{"output.paraview": False})
     assert output_volume(build_model(off)) == 151 * (per - 112 * 10_000)
+
+
+def test_output_volume_limit_applies_only_to_runs_that_write(tmp_path):
+    """A run kept in memory writes nothing: the scenario whose files would pass
+    output.size_limit runs there (and in a study case that keeps no files); written to a
+    folder it is refused before anything is written."""
+    from emfabric.runner.loop import run
+
+    sc = load_scenario("paper-field").replace(**{"output.snapshot_interval": 1e-9})
+    result = run(sc, None, end_time=2e-8)
+    assert result.status == "complete" and result.state.t == pytest.approx(2e-8)
+    with pytest.raises(ScenarioError, match="above output.size_limit"):
+        run(sc, tmp_path / "out", end_time=2e-8)
+    assert not (tmp_path / "out" / "history.nc").exists()

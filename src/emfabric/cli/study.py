@@ -53,7 +53,7 @@ def _warn_actuation(scenario, what: str) -> None:
     from emfabric.sim.plausibility import actuation_report
 
     try:
-        found = actuation_report(build_model(scenario))["warnings"]
+        found = actuation_report(build_model(scenario, writes=False))["warnings"]
     except (ValueError, RuntimeError):
         return  # the study reports an unbuildable scenario itself
     for w in found:

@@ -103,7 +103,9 @@ def run(
     attached as `.result`. threads: Numba threads for the node kernels (1: the serial kernel;
     default: integrators.default_threads for the problem's size); the numbers are the same.
     """
-    model = scenario if isinstance(scenario, Model) else build_model(scenario)
+    # a run kept in memory writes nothing: no output-volume limit (sim.sanity)
+    model = scenario if isinstance(scenario, Model) else build_model(
+        scenario, writes=out_dir is not None)
     log_warnings(model, log)  # is the charge physical? (emfabric.sim.plausibility)
     if out_dir is None:
         return _loop(model, None, None, None, progress, end_time, threads)

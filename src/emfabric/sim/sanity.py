@@ -13,7 +13,9 @@ Two kinds, both from numbers the scenario gives:
   bytes is refused before it starts (raise the limit to ask for it).
 
 `build_model` logs the warnings and applies the volume check, so `emfabric validate`, `run` and
-every study case see them.
+every study case see them; the volume check only where the run writes its files
+(`build_model(..., writes=False)` for a run kept in memory: `emfabric.run(scenario)` with no
+folder, a study case that keeps no files).
 """
 
 from __future__ import annotations

@@ -57,7 +57,7 @@ def estimate(scenario: Scenario, tilt: float, by: float) -> Estimate:
         raise ValueError(f"--target-tilt {tilt}: allowed: a positive angle [rad]")
     if not (by > 0.0 and math.isfinite(by)):
         raise ValueError(f"--by {by}: allowed: a positive time [s]")
-    model = build_model(scenario)
+    model = build_model(scenario, writes=False)  # an estimate: nothing written
     if not model.has_body:
         raise ValueError("the scenario has no projectile (projectile.shape = \"none\"): there "
                          "is nothing to tilt")
