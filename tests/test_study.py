@@ -150,6 +150,34 @@ def test_study_file_errors_say_what(tmp_path):
         load_study(tmp_path / "nope.toml")
 
 
+
+def test_study_keys_may_be_toml_dotted_keys(tmp_path):
+    """MODEL.md §6: "[set] dotted key = value; [axes] dotted key = [values]". Written as TOML
+    dotted keys (which TOML reads as nested tables) the study is the one with quoted keys: the
+    same cases, overrides and scenarios (the base's other [fabric] and [solver] keys kept), and
+    a key given both ways is an error naming it."""
+    from emfabric.studies.sweep import StudyError
+
+    quoted, dotted = tmp_path / "quoted.toml", tmp_path / "dotted.toml"
+    quoted.write_text(STUDY)
+    dotted.write_text(STUDY.replace('"', "").replace("base = demo-small", 'base = "demo-small"'))
+    a, b = load_study(quoted), load_study(dotted)
+    assert a.dims == b.dims == ["field.B", "fabric.material.seed"]
+    assert [c.overrides for c in a.cases] == [c.overrides for c in b.cases]
+    assert [c.text for c in a.cases] == [c.text for c in b.cases]
+    assert a.cases[0].scenario.fabric.nodes == (13, 13)
+    assert a.cases[0].scenario.solver.integrator == "central-difference"
+    lhs = tmp_path / "lhs.toml"
+    lhs.write_text('base = "demo-small"\n[lhs]\nsamples = 4\n'
+                   '[lhs.ranges]\nprojectile.mass = [0.02, 0.04]\n')
+    assert list(load_study(lhs).cases[0].overrides) == ["projectile.mass"]
+    both = tmp_path / "both.toml"
+    both.write_text('base = "demo-small"\n[set]\n"fabric.nodes" = [13, 13]\n'
+                    'fabric.nodes = [14, 14]\n')
+    with pytest.raises(StudyError, match="'fabric.nodes' is given twice"):
+        load_study(both)
+
+
 # --- field design (eqs 5.3-5.4 and the search) ---------------------------------------------
 
 def test_estimate_is_eq_5_4_with_the_node_charge():

@@ -141,6 +141,36 @@ def case_key(text: str) -> str:
     return hashlib.sha256(f"{__version__}\n{text}".encode()).hexdigest()[:16]
 
 
+def _flatten(table: dict[str, Any], prefix: str, out: dict[str, Any], where: str) -> None:
+    for key, value in table.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, dict):
+            _flatten(value, f"{name}.", out, where)
+        elif name in out:
+            raise StudyError(f"{where}: the key {name!r} is given twice (quoted and as TOML "
+                             f"dotted keys)")
+        else:
+            out[name] = value
+
+
+def _dotted(data: dict[str, Any], path: Path) -> dict[str, Any]:
+    """[set], [axes] and [lhs].ranges keyed by dotted scenario keys, whichever way the file
+    writes them: quoted ("fabric.nodes" = …) or as TOML dotted keys (fabric.nodes = …, which
+    TOML reads as nested tables)."""
+    data = dict(data)
+    for section in ("set", "axes"):
+        if isinstance(data.get(section), dict):
+            flat: dict[str, Any] = {}
+            _flatten(data[section], "", flat, f"study file {str(path)!r}, [{section}]")
+            data[section] = flat
+    lhs = data.get("lhs")
+    if isinstance(lhs, dict) and isinstance(lhs.get("ranges"), dict):
+        flat = {}
+        _flatten(lhs["ranges"], "", flat, f"study file {str(path)!r}, [lhs].ranges")
+        data["lhs"] = {**lhs, "ranges": flat}
+    return data
+
+
 def load_study(path: str | Path) -> Plan:
     """Read and check a study file; every case's scenario is validated here, before any run
     (errors name the case's overrides and the key)."""
@@ -152,7 +182,7 @@ def load_study(path: str | Path) -> Plan:
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
         raise StudyError(f"study file {str(path)!r}: invalid TOML ({err})") from None
     try:
-        study = Study.model_validate(data)
+        study = Study.model_validate(_dotted(data, path))
     except ValidationError as err:
         lines = [f"  {'.'.join(str(p) for p in e['loc']) or '(top)'}: {e['msg']}"
                  for e in err.errors()]
