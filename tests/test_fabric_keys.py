@@ -78,6 +78,43 @@ def test_a_pack_mixes_materials_and_strengths():
                 "fabric.ply": [{}, {"damage": {"law": "zohdi"}}]})
 
 
+
+def test_a_ply_may_name_its_own_datasheet():
+    """MODEL.md: [[fabric.ply]] overrides any fabric key that is not the frame's geometry, so
+    the datasheet keys too: a KM2 pack whose second ply is the Dyneema style is, ply by ply,
+    the single sheets of those styles on the same frame (material, cross-section tex·1e-6/ρ,
+    pitch, areal density, one network line per yarn unless the ply writes its nodes), with the
+    pack's damage law; written out in full it reads back to the same plies; a bad ply names it."""
+    frame = {"fabric.size": [0.1, 0.1]}
+    pack = make(**frame, **{"fabric.style": "km2-600d-plain", "fabric.plies": 2,
+                            "fabric.ply": [{}, {"style": "sk76-1760dtex-plain"}]})
+    for p, style in enumerate(("km2-600d-plain", "sk76-1760dtex-plain")):
+        ply = pack.fabric.ply_fabric(p)
+        alone = make(**frame, **{"fabric.style": style}).fabric
+        for key in ("nodes", "reference_nodes", "areal_density", "yarn_radius", "thread_count",
+                    "yarn_linear_density"):
+            assert getattr(ply, key) == getattr(alone, key), (style, key)
+        assert ply.material == alone.material and ply.damage.law == "brittle"
+    dyneema = pack.fabric.ply_fabric(1)
+    assert dyneema.material.name == "dyneema-sk76" and dyneema.areal_density == 0.24
+    assert dyneema.yarn_radius == pytest.approx(math.sqrt(176.0 * 1e-6 / 970.0 / math.pi))
+    assert dyneema.reference_nodes == (round(0.1 * 100 * 6.5) + 1,) * 2
+    assert scenario_from_dict(pack.to_dict()).fabric.ply_fabric(1) == dyneema
+    # its own keys over its datasheet; the pack's law (eq. 2.6 here) for every ply
+    mixed = make(**frame, **{"fabric.plies": 2, "fabric.ply": [
+        {}, {"yarn_denier": 600.0, "material": {"name": "kevlar-km2"}, "nodes": [21, 21]}]})
+    km2 = mixed.fabric.ply_fabric(1)
+    assert km2.nodes == (21, 21) and km2.damage.law == mixed.fabric.damage.law == "zohdi"
+    assert km2.yarn_radius == pytest.approx(math.sqrt(600 / 9 * 1e-6 / 1440 / math.pi))
+    m = build_model(pack.replace(**{"fabric.ply": [{"nodes": [21, 21]},
+                                                   {"style": "sk76-1760dtex-plain",
+                                                    "nodes": [15, 15]}]}))
+    assert [m.ply_grid(p) for p in range(2)] == [(21, 21), (15, 15)]
+    with pytest.raises(ScenarioError, match=r"ply\[1\]\.style = 'nope'.*allowed"):
+        make(**{"fabric.plies": 2, "fabric.ply": [{}, {"style": "nope"}]})
+    with pytest.raises(ScenarioError, match=r"ply\[1\]: yarn_denier = 600.0 needs the fibre"):
+        make(**{"fabric.plies": 2, "fabric.ply": [{}, {"yarn_denier": 600.0}]})
+
 def test_fsp_into_a_real_fabric_breaks_yarns_at_their_failure_strain():
     """The issue's user: style and library material, an FSP through one ply; yarns break at
     KM2's 4.52 %: yarns break, and the largest stretch of a yarn still intact comes within

@@ -343,12 +343,23 @@ class Fabric(_Section):
                             "weibull_shape)")
         return self
 
+    @model_validator(mode="after")
+    def _datasheet_plies(self) -> Fabric:
+        # a ply that names its own datasheet is built here, so that its errors are the
+        # scenario's (and name the ply)
+        for i, table in enumerate(self.ply):
+            if any(getattr(table, k) is not None for k in DATASHEET_KEYS):
+                self.ply_fabric(i)
+        return self
+
     def ply_fabric(self, index: int) -> Fabric:
         """The fabric of ply `index` (0 = the top one): this section with that ply's table
         laid over it."""
         if not self.ply:
             return self
         over = self.ply[index].model_dump(exclude_none=True)
+        if any(k in over for k in DATASHEET_KEYS):
+            return self._datasheet_ply(index, over)
         base = self.model_dump()
         if "name" in over.get("material", {}):
             # another library material: what the pack's came from its library entry is not kept
@@ -368,6 +379,28 @@ class Fabric(_Section):
         return self.model_copy(update={**{k: (MaterialSpec(**v) if k == "material" else
                                                Damage(**v) if k == "damage" else v)
                                             for k, v in over.items()}, "ply": ()})
+
+    def _datasheet_ply(self, index: int, over: dict[str, Any]) -> Fabric:
+        """A ply whose table names its own datasheet (DATASHEET_KEYS): the pack's section without
+        its datasheet and what a datasheet derives (DERIVED_KEYS), nor, where the ply names
+        a style or a material, the pack's material name and library values; the ply's table
+        over that; validated, so that the ply's datasheet supplies the rest. The same ply
+        whether the pack's values were written or derived (a scenario written out in full
+        reads back to the same plies). The damage law stays the pack's (one law per pack)."""
+        base = self.model_dump(exclude={"ply", *DATASHEET_KEYS, *DERIVED_KEYS})
+        if "style" in over or "name" in over.get("material", {}):
+            base["material"] = {k: v for k, v in base["material"].items()
+                                if k not in (*LIBRARY_KEYS, "name")}
+        for key in ("material", "damage"):
+            if key in over:
+                over[key] = {**base[key], **over[key]}
+        try:
+            return Fabric.model_validate({**base, **over})
+        except ValidationError as err:
+            first = err.errors()[0]
+            where = ".".join(str(x) for x in first["loc"])
+            msg = first["msg"].removeprefix("Value error, ")
+            raise ValueError(f"ply[{index}]{'.' + where if where else ''}: {msg}") from None
 
 
 class _MaterialOverride(_Section):
@@ -421,8 +454,33 @@ class PlySpec(_Section):
     """As fabric.rescale, for this ply."""
     reference_nodes: tuple[Annotated[int, Field(ge=2)], Annotated[int, Field(ge=2)]] | None = None
     """As fabric.reference_nodes, for this ply."""
+    style: str | None = None
+    """This ply's fabric from its datasheet (as fabric.style): it supplies this ply's
+    material.name, yarn_linear_density, thread_count and areal_density (and from them its
+    yarn_radius, reference_nodes and nodes) where this table does not write them."""
+    yarn_linear_density: PositiveFloat | None = None
+    """[tex] (as fabric.yarn_linear_density), for this ply."""
+    yarn_denier: PositiveFloat | None = None
+    """[denier] (as fabric.yarn_denier), for this ply."""
+    thread_count: tuple[PositiveFloat, PositiveFloat] | None = None
+    """Ends and picks per cm [1/cm] (as fabric.thread_count), for this ply."""
     material: _MaterialOverride | None = None
     damage: _DamageOverride | None = None
+
+    @field_validator("style")
+    @classmethod
+    def _known_style(cls, v: str | None) -> str | None:
+        if v is not None:
+            from emfabric.config.library import fabric_style
+
+            fabric_style(v)  # ValueError naming the allowed styles
+        return v
+
+
+DATASHEET_KEYS = ("style", "yarn_linear_density", "yarn_denier", "thread_count")
+"""A ply table that writes one of these is its own fabric from its datasheet (Fabric.ply_fabric)."""
+DERIVED_KEYS = ("areal_density", "yarn_radius", "reference_nodes", "nodes")
+"""What a datasheet gives a fabric where it is not written."""
 
 
 Fabric.model_rebuild()
