@@ -115,6 +115,18 @@ def test_a_ply_may_name_its_own_datasheet():
     with pytest.raises(ScenarioError, match=r"ply\[1\]: yarn_denier = 600.0 needs the fibre"):
         make(**{"fabric.plies": 2, "fabric.ply": [{}, {"yarn_denier": 600.0}]})
 
+
+def test_ply_tables_are_checked_like_the_fabric():
+    """A ply's library material name is checked at load (the allowed names listed), and a
+    ply's brittle-law keys under a pack of eq. 2.6 are refused, as on a single sheet."""
+    with pytest.raises(ScenarioError, match=r"ply.*material.*name.*'kevlar'.*allowed.*kevlar-km2"):
+        make(**{"fabric.plies": 2, "fabric.ply": [{}, {"material": {"name": "kevlar"}}]})
+    with pytest.raises(ScenarioError, match=r"ply\[1\]\.damage\.failure_strain = 0.03 is a key "
+                                            r"of law = 'brittle'"):
+        make(**{"fabric.plies": 2, "fabric.ply": [{}, {"damage": {"failure_strain": 0.03}}]})
+    with pytest.raises(ScenarioError, match=r"ply\[0\]\.damage\.weibull_shape"):
+        make(**{"fabric.plies": 2, "fabric.ply": [{"damage": {"weibull_shape": 5.0}}, {}]})
+
 def test_fsp_into_a_real_fabric_breaks_yarns_at_their_failure_strain():
     """The issue's user: style and library material, an FSP through one ply; yarns break at
     KM2's 4.52 %: yarns break, and the largest stretch of a yarn still intact comes within

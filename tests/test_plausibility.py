@@ -166,6 +166,19 @@ def test_run_summary_and_start_log(tmp_path, caplog):
     assert s["charge_plausible"] is False
     assert isinstance(s["plausibility_warnings"], list) and len(s["plausibility_warnings"]) == 1
     assert s["surface_charge_C_m2"] == pytest.approx(1e4 / L**2, rel=1e-9)  # rescaled q
+    # against air's dielectric strength (σ/(2ε0) over 3 MV/m) and the yarn's strength (the
+    # paper's Zylon names none: null)
+    assert s["field_over_air_breakdown"] == pytest.approx(1e4 / L**2 / (2 * EPS0) / 3e6,
+                                                          rel=1e-9)
+    assert s["tensile_strength_Pa"] is None and s["pressure_over_strength"] is None
+    km2 = subprocess.run(args + ["--out", str(tmp_path / "c"), "--json", "--set",
+                                 'fabric.material.name="kevlar-km2"'],
+                         capture_output=True, text=True)
+    assert km2.returncode == 0, km2.stderr
+    k = json.loads(km2.stdout)
+    assert k["tensile_strength_Pa"] == pytest.approx(3.88e9)
+    assert k["pressure_over_strength"] == pytest.approx(
+        k["electrostatic_pressure_Pa"] / 3.88e9, rel=1e-9)
     t = subprocess.run(args + ["--out", str(tmp_path / "b")], capture_output=True, text=True)
     assert t.returncode == 0, t.stderr
     assert "plausibility_warnings" in t.stderr and "charge_plausible" in t.stderr

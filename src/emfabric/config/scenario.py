@@ -265,6 +265,14 @@ class Fabric(_Section):
                 raise ValueError(
                     f"ply[{i}].damage.law = {table.damage.law!r} differs from fabric.damage.law "
                     f"= {dmg.law!r}; allowed: one damage law for the whole pack")
+            if table.damage is not None and not dmg.brittle:
+                for key in ("failure_strain", "weibull_shape"):
+                    value = getattr(table.damage, key)
+                    if value is not None and value != 0.0:
+                        raise ValueError(
+                            f"ply[{i}].damage.{key} = {value} is a key of law = 'brittle'; the "
+                            f"pack's law is {dmg.law!r} (one law per pack): allowed: "
+                            "fabric.damage.law = 'brittle' with it, or leave it out")
         if dmg.brittle:
             if dmg.failure_strain is None and self.material.failure_strain is None:
                 why = ("damage.law = 'brittle'" if "law" in dmg.model_fields_set else
@@ -344,12 +352,17 @@ class Fabric(_Section):
         return self
 
     @model_validator(mode="after")
-    def _datasheet_plies(self) -> Fabric:
-        # a ply that names its own datasheet is built here, so that its errors are the
-        # scenario's (and name the ply)
-        for i, table in enumerate(self.ply):
-            if any(getattr(table, k) is not None for k in DATASHEET_KEYS):
+    def _ply_fabrics(self) -> Fabric:
+        # every ply's fabric is built here, so that its errors are the scenario's (naming the
+        # ply) and not the model builder's
+        for i in range(len(self.ply)):
+            try:
                 self.ply_fabric(i)
+            except ValidationError as err:
+                first = err.errors()[0]
+                where = ".".join(str(x) for x in first["loc"])
+                msg = first["msg"].removeprefix("Value error, ")
+                raise ValueError(f"ply[{i}]{'.' + where if where else ''}: {msg}") from None
         return self
 
     def ply_fabric(self, index: int) -> Fabric:
@@ -425,6 +438,15 @@ class _MaterialOverride(_Section):
     H: PositiveFloat | None = None
     """Fung constant H [-]."""
 
+
+    @field_validator("name")
+    @classmethod
+    def _known_material(cls, v: str | None) -> str | None:
+        if v is not None:
+            from emfabric.config.library import library_material
+
+            library_material(v)  # ValueError naming the allowed names
+        return v
 
 class _DamageOverride(_Section):
     law: Literal["zohdi", "brittle"] | None = None

@@ -116,6 +116,11 @@ def summarize(result) -> dict[str, Any]:
         "surface_charge_C_m2": act["surface_charge_C_m2"],
         "surface_field_V_m": act["max_surface_field_V_m"],
         "electrostatic_pressure_Pa": act["electrostatic_pressure_Pa"],
+        # against what holds: air's dielectric strength and the yarn's tensile strength (None
+        # where the scenario names no strength: no library material, no tensile_strength)
+        "field_over_air_breakdown": act["field_over_air_breakdown"],
+        "tensile_strength_Pa": act["tensile_strength_Pa"],
+        "pressure_over_strength": act["pressure_over_strength"],
         "charge_plausible": act["charge_plausible"],
         "plausibility_warnings": act["warnings"],
     })
