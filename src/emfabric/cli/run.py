@@ -173,6 +173,8 @@ def _print_summary(result, as_json: bool) -> None:
     table.add_column("value", justify="right")
 
     def fmt(v) -> str:
+        if v is None:
+            return "not given"  # (the yarn strength of a scenario without one)
         if isinstance(v, list) and not v:
             return "none"
         if isinstance(v, list):
