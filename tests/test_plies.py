@@ -76,6 +76,24 @@ def test_pack_keys_are_checked(bad, words):
             "fabric.plies": 3, "fabric.nodes": [11, 11], **bad}))
 
 
+
+def test_plies_not_written_follow_the_angles_or_tables_given_by_overrides():
+    """As in a file (plies not written: as many as [[fabric.ply]] tables, else as ply_angles),
+    an override on a scenario that does not write plies: `--set fabric.ply_angles=[0,45]` on
+    the paper's sheet is a 2-ply pack, the one a file writing only ply_angles gives; a written
+    plies is kept (and a mismatch refused, above)."""
+    from emfabric.config.scenario import scenario_from_dict
+
+    two = load_scenario("paper-no-field", {"fabric.ply_angles": [0.0, 45.0]})
+    assert two.fabric.plies == 2 and two.fabric.ply_angles == (0.0, 45.0)
+    data = load_scenario("paper-no-field").to_dict()
+    data["fabric"].pop("plies")
+    data["fabric"]["ply_angles"] = [0.0, 45.0]
+    assert scenario_from_dict(data) == two
+    assert load_scenario("paper-no-field", {"fabric.ply": [{}, {}, {}]}).fabric.plies == 3
+    assert load_scenario("pack-field", {"fabric.nodes": [21, 21]}).fabric.plies == \
+        load_scenario("pack-field").fabric.plies
+
 def test_rotated_ply_is_clipped_to_the_frame():
     """A ±45° ply: a rotated grid whose nodes strictly inside the frame are free, those next to
     them clamped and the rest massless; its mass is the ply's, its free nodes fill the frame."""

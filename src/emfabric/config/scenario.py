@@ -1692,7 +1692,7 @@ def apply_overrides(scenario: Scenario, overrides: dict[str, Any]) -> Scenario:
         fab = scenario.fabric
         fd = data.setdefault("fabric", {})
         for key in ("areal_density", "yarn_radius", "reference_nodes", "nodes", "thread_count",
-                    "yarn_linear_density"):
+                    "yarn_linear_density", "plies"):  # plies: from ply tables or ply_angles
             if key not in fab.model_fields_set:
                 fd.pop(key, None)
         mat = fab.material
