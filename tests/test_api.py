@@ -73,3 +73,38 @@ def test_thread_count_chooses_the_kernel():
         assert not make_integrator(model).threaded
         assert not make_integrator(model, threads=1).threaded
         assert make_integrator(model, threads=2).threaded == (numba.config.NUMBA_NUM_THREADS > 1)
+
+
+def test_study_cases_run_on_the_threads_asked_for(monkeypatch):
+    """`--threads N` on a study reaches each case's run (threads=N); without it a case runs on
+    the default within its share of the cores: default_threads counts the Numba threads the
+    process is set to (numba.set_num_threads, as run_case sets the share), not every core."""
+    import numba
+
+    import emfabric.runner
+    from emfabric.integrators import THREADS_FROM_NODES, default_threads
+    from emfabric.studies.sweep import run_case
+
+    seen = []
+
+    def fake_run(sc, out, threads=None):
+        seen.append(threads)
+        raise RuntimeError("not run")
+
+    monkeypatch.setattr(emfabric.runner, "run", fake_run)
+    text = _small().to_toml()
+    assert run_case(text, None, 2, explicit=True)["status"] == "failed"
+    assert run_case(text, None, 2)["status"] == "failed"
+    assert seen == [2, None]
+
+    class Big:
+        node_count = THREADS_FROM_NODES
+
+    before = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        assert default_threads(Big()) == 1
+        numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+        assert default_threads(Big()) == numba.config.NUMBA_NUM_THREADS
+    finally:
+        numba.set_num_threads(before)

@@ -56,6 +56,8 @@ def test_snapshots_and_paraview(small_run):
     assert snap.node_position.shape == (4, 169, 3)
     assert snap.yarn_damage.shape == (4, res.model.seg_count)
     np.testing.assert_array_equal(snap.node_position[-1].values, res.state.node_x.T)
+    # the run's end in its header too, as in history.nc's (it was created "partial")
+    assert (snap.attrs["status"], snap.attrs["end_reason"]) == (res.status, res.end_reason)
     pvd = (out / "fabric.pvd").read_text()
     assert pvd.count("<DataSet") == 4
     import meshio

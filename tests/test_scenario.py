@@ -94,3 +94,13 @@ def test_bad_toml_file(tmp_path):
     path.write_text("[fabric\nnodes = 3")
     with pytest.raises(ScenarioError, match="invalid TOML in .*broken.toml"):
         load_scenario(path)
+
+
+def test_a_section_that_is_not_a_table_is_refused_with_contact_placement_written():
+    """contact.placement written without an integrator chooses the φ-scheme; a `solver` that
+    is not a table next to it is still refused (it was replaced by the default section)."""
+    with pytest.raises(ScenarioError, match=r"solver = 1: needs a table"):
+        load_scenario("paper-field", {"solver": 1})
+    with pytest.raises(ScenarioError, match=r"solver = 'fast': needs a table"):
+        scenario_from_dict({"contact": {"placement": "phi-update"}, "solver": "fast"})
+    assert scenario_from_dict({"contact": {"placement": "phi-update"}}).solver.integrator == "phi"

@@ -37,8 +37,8 @@ SchedulerOpt = Annotated[str | None, typer.Option(
     "--scheduler", help="Address of an existing Dask scheduler (e.g. tcp://host:8786); its "
                         "workers run the cases")]
 ThreadsOpt = Annotated[int | None, typer.Option(
-    "--threads", help="Numba threads per case (default: cores / workers locally, 1 on a "
-                      "scheduler)")]
+    "--threads", min=1, help="Numba threads per case (default: each case's default within "
+                             "cores / workers locally, 1 on a scheduler)")]
 VerboseOpt = Annotated[bool, typer.Option(
     "--verbose", "-v", help="Show Dask's own log messages and warnings (also: "
                             "EMFABRIC_DASK_VERBOSE=1)")]

@@ -859,7 +859,9 @@ class Scenario(_Section):
             return data
         contact, solver = data.get("contact"), data.get("solver")
         if (isinstance(contact, dict) and "placement" in contact
+                and (solver is None or isinstance(solver, dict))
                 and not (isinstance(solver, dict) and "integrator" in solver)):
+            # (a solver that is not a table is left for validation to refuse)
             solver = dict(solver) if isinstance(solver, dict) else {}
             data = {**data, "solver": {**solver, "integrator": "phi"}}
         return data

@@ -25,10 +25,12 @@ def default_threads(model) -> int:
     sheet 6 % faster on the idle 2-core machine and 2× slower with three busy processes beside
     it: every iterate ends at a barrier that waits for a descheduled thread), else every core
     Numba has — and then the integrator keeps checking, by timing, that the threaded kernels
-    are faster than the serial ones (adaptive threads, IntegratorBase)."""
+    are faster than the serial ones (adaptive threads, IntegratorBase). "Every core" is the
+    thread count Numba is set to (numba.get_num_threads(): NUMBA_NUM_THREADS unless lowered,
+    as a study case lowers it to its share of the cores)."""
     import numba
 
-    return numba.config.NUMBA_NUM_THREADS if model.node_count >= THREADS_FROM_NODES else 1
+    return numba.get_num_threads() if model.node_count >= THREADS_FROM_NODES else 1
 
 
 def make_integrator(model, *, threads: int | None = None) -> IntegratorBase:

@@ -219,6 +219,10 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
                 written = recorder.count
         with _naming(out / "snapshots.nc"):
             snaps.flush(attrs)
+            if history is not None and (out / "snapshots.nc").is_file():
+                # the run's end in snapshots.nc's header too (its attributes are those it was
+                # created with: status partial), in place (its records stay where they are)
+                mark_status(out / "snapshots.nc", status, reason)
         if model.scenario is None:
             return  # nothing to rebuild the Model from on resume
         with _naming(out / CHECKPOINT):

@@ -144,7 +144,8 @@ def ballistic_limit(scenario: Scenario, out, *, seeds: int = 0, tolerance: float
         if todo:
             if client is None:
                 client, cluster, per_case = connect(workers, scheduler, threads)
-            run_cases(todo, out, client, per_case, False)
+            run_cases(todo, out, client, per_case, False,
+                      explicit=threads is not None)
         got = []
         for (speed, seed, _sc), case in zip(scenarios, cases, strict=True):
             rec = read_case(out, case) or {"status": "failed", "perforated": -1}

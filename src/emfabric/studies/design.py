@@ -137,7 +137,8 @@ def design_field(scenario: Scenario, tilt: float, by: float, out, *,
             if todo:
                 if client is None:
                     client, cluster, per_case = connect(workers, scheduler, threads)
-                run_cases(todo, out, client, per_case, False)
+                run_cases(todo, out, client, per_case, False,
+                          explicit=threads is not None)
             for s, c in zip(scales, cases, strict=True):
                 rec = read_case(out, c) or {}
                 status = str(rec.get("status", "failed"))

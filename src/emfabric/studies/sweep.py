@@ -231,9 +231,13 @@ def plan_study(study: Study, base: str) -> Plan:
 
 # --- one case, on a worker ------------------------------------------------------------------
 
-def run_case(text: str, out: str | None, threads: int) -> dict[str, Any]:
+def run_case(text: str, out: str | None, threads: int, explicit: bool = False
+             ) -> dict[str, Any]:
     """Run the scenario whose TOML text is given and return its metrics (never raises for a
-    run that diverges or fails: the status and message say so). Called on a Dask worker."""
+    run that diverges or fails: the status and message say so). Called on a Dask worker.
+    threads: the Numba threads the case may use; explicit (the user's --threads): the case
+    runs on that many, else on integrators.default_threads within them (one thread below
+    its size threshold)."""
     import numba
 
     from emfabric.runner import DivergenceError, run
@@ -255,7 +259,7 @@ def run_case(text: str, out: str | None, threads: int) -> dict[str, Any]:
     if not any(isinstance(f, _WithoutPlausibility) for f in loop_log.filters):
         loop_log.addFilter(_WithoutPlausibility())
     try:
-        result = run(sc, out)
+        result = run(sc, out, threads=threads if explicit else None)
     except (DivergenceError, OSError, RuntimeError, ValueError, ArithmeticError) as exc:
         result = getattr(exc, "result", None)
         message = f"{type(exc).__name__}: {exc}"
@@ -429,16 +433,18 @@ def connect(workers: int | None, scheduler: str | None, threads: int | None
 
 
 def run_cases(cases: list[Case], out: Path, client, threads: int, keep: bool,
-              progress: Callable[[int, int], None] | None = None) -> None:
+              progress: Callable[[int, int], None] | None = None,
+              explicit: bool = False) -> None:
     """Run the cases on the Dask client, storing each result (read_case) as it arrives. A
-    worker that dies mid-case: Dask runs the case again (retries)."""
+    worker that dies mid-case: Dask runs the case again (retries). threads, explicit: as
+    run_case's."""
     from dask.distributed import as_completed
 
     futures = {}
     for case in cases:
         where = str(out / "runs" / case.key) if keep else None
-        fut = client.submit(run_case, case.text, where, threads, key=f"emfabric-case-{case.key}",
-                            pure=False, retries=2)
+        fut = client.submit(run_case, case.text, where, threads, explicit,
+                            key=f"emfabric-case-{case.key}", pure=False, retries=2)
         futures[fut] = case
     done = 0
     for fut in as_completed(futures):
@@ -478,7 +484,8 @@ def _sweep(plan: Plan, out: Path, workers: int | None, scheduler: str | None,
         client, cluster, per_case = connect(workers, scheduler, threads)
         interrupted = False
         try:
-            run_cases(todo, out, client, per_case, plan.study.keep_histories, progress)
+            run_cases(todo, out, client, per_case, plan.study.keep_histories, progress,
+                      explicit=threads is not None)
         except KeyboardInterrupt:
             interrupted = True
             raise
