@@ -70,6 +70,27 @@ def test_input_errors_exit_2(tmp_path, done_run):
         assert needle in r.stderr and "Traceback" not in r.stderr, (name, r.stderr)
 
 
+
+@pytest.mark.parametrize("args, needle", [
+    (["run", "demo-small", "--threads", "x"], "'--threads': 'x': allowed: a whole number ≥ 1"),
+    (["run", "demo-small", "--threads", "0"], "'--threads': '0': allowed: a whole number ≥ 1"),
+    (["sweep", "s.toml", "--out", "o", "--threads", "-1"], "'--threads': '-1': allowed"),
+    (["sweep", "s.toml", "--out", "o", "--workers", "0"], "'--workers': '0': allowed"),
+    (["field", "demo-small", "--time", "soon"], "'--time': 'soon': allowed: a finite number"),
+    (["ballistic-limit", "rupture", "--out", "o", "--seeds", "-2"], "'--seeds': '-2': allowed"),
+])
+def test_option_values_are_refused_in_plain_words(args, needle):
+    """A bad option value exits 2 naming the option, the value and what is allowed, in plain
+    words (issue 25: never pydantic's vocabulary, "Input should be a valid integer")."""
+    from typer.testing import CliRunner
+
+    from emfabric.cli import app
+
+    r = CliRunner().invoke(app, args, env={"COLUMNS": "200"})  # one line in the error box
+    text = " ".join(r.output.split())
+    assert r.exit_code == 2, r.output
+    assert needle in text and "Input should" not in text, r.output
+
 def test_unreadable_input_file_exits_2_in_one_line(tmp_path):
     run_dir = tmp_path / "garbage"
     run_dir.mkdir()

@@ -33,6 +33,29 @@ out_console = Console()
 """Tables meant for reading on stdout (`scenarios`); machine-readable output uses emit()."""
 
 
+def number(kind: type, minimum: float | None = None):
+    """An option's parser: the value as `kind` (int or float), at least `minimum`; a bad
+    value is a usage error (exit 2) that says what is allowed, in plain words."""
+    import math
+
+    allowed = "a whole number" if kind is int else "a finite number"
+    if minimum is not None:
+        allowed += f" ≥ {minimum:g}"
+
+    def parse(value):
+        if value is None or isinstance(value, bool):
+            return value
+        try:
+            v = kind(value) if not isinstance(value, str) else kind(value.strip())
+        except (TypeError, ValueError):
+            raise typer.BadParameter(f"{value!r}: allowed: {allowed}") from None
+        if (kind is float and not math.isfinite(v)) or (minimum is not None and v < minimum):
+            raise typer.BadParameter(f"{value!r}: allowed: {allowed}")
+        return v
+
+    return parse
+
+
 def error(message: str) -> None:
     """An error line on stderr: user text is never read as console markup, and long lines
     are not wrapped (a piped message stays one line)."""

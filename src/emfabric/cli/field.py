@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from emfabric.cli.app import EXIT_INPUT, app, emit, error, load_or_exit, writing
+from emfabric.cli.app import EXIT_INPUT, app, emit, error, load_or_exit, number, writing
 from emfabric.config.scenario import ScenarioError
 
 _load = load_or_exit
@@ -50,7 +50,7 @@ def _check_format(path: Path) -> None:
 def field(
     ctx: typer.Context,
     scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name")],
-    at_time: Annotated[float, typer.Option("--time", help="Time [s]")] = 0.0,
+    at_time: Annotated[float, typer.Option("--time", parser=number(float), help="Time [s]")] = 0.0,
     plot: Annotated[Path | None, typer.Option(
         "--plot", help="Draw B (and the induced E) over the sheet's plane with the coils, "
                        "and along the flight axis, to this file (PNG, PDF, SVG)")] = None,

@@ -16,6 +16,7 @@ from emfabric.cli.app import (
     check_readable,
     emit,
     error,
+    number,
     show_messages,
     writing,
 )
@@ -53,7 +54,7 @@ def animate(
     gif: Annotated[bool, typer.Option("--gif", help="Also write a GIF")] = False,
     mp4: Annotated[bool, typer.Option(
         "--mp4/--no-mp4", help="Write the MP4 (needs the `mp4` extra: imageio-ffmpeg)")] = True,
-    fps: Annotated[int, typer.Option(min=1, help="Frames per second")] = 10,
+    fps: Annotated[int, typer.Option(parser=number(int, 1), help="Frames per second")] = 10,
 ) -> None:
     """Write an MP4 (and GIF) of the impact from the run's snapshots; prints their paths."""
     from emfabric.viz.animation import MP4_MISSING

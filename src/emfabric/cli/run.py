@@ -22,6 +22,7 @@ from emfabric.cli.app import (
     error,
     hold_folder,
     load_or_exit,
+    number,
     out_console,
     show_messages,
     writing,
@@ -55,9 +56,9 @@ def run(
     force: Annotated[bool, typer.Option(
         "--force", help="Replace the run already in the output folder")] = False,
     threads: Annotated[int | None, typer.Option(
-        "--threads", min=1, help="Numba threads for the node kernels (1: serial; default: 1 "
-                                 "below 250 x 250 nodes, else every core); the results are "
-                                 "the same")] = None,
+        "--threads", parser=number(int, 1),
+        help="Numba threads for the node kernels (1: serial; default: 1 below 250 x 250 nodes, "
+             "else every core); the results are the same")] = None,
 ) -> None:
     """Run a scenario; write history.nc, snapshots, ParaView files and a checkpoint into the output folder as the run goes (--resume DIR continues a stopped run)."""  # noqa: E501
     from emfabric.io.checkpoint import CHECKPOINT, CheckpointError, read_checkpoint

@@ -28,17 +28,20 @@ from emfabric.cli.app import (
     error,
     hold_folder,
     load_or_exit,
+    number,
     writing,
 )
 
 WorkersOpt = Annotated[int | None, typer.Option(
-    "--workers", help="Local Dask cluster of N worker processes (default: one per two cores)")]
+    "--workers", parser=number(int, 1),
+    help="Local Dask cluster of N worker processes (default: one per two cores)")]
 SchedulerOpt = Annotated[str | None, typer.Option(
     "--scheduler", help="Address of an existing Dask scheduler (e.g. tcp://host:8786); its "
                         "workers run the cases")]
 ThreadsOpt = Annotated[int | None, typer.Option(
-    "--threads", min=1, help="Numba threads per case (default: each case's default within "
-                             "cores / workers locally, 1 on a scheduler)")]
+    "--threads", parser=number(int, 1),
+    help="Numba threads per case (default: each case's default within cores / workers "
+         "locally, 1 on a scheduler)")]
 VerboseOpt = Annotated[bool, typer.Option(
     "--verbose", "-v", help="Show Dask's own log messages and warnings (also: "
                             "EMFABRIC_DASK_VERBOSE=1)")]
@@ -172,8 +175,10 @@ SetOpt = Annotated[list[str] | None, typer.Option(
 @app.command()
 def estimate(
     scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name")],
-    target_tilt: Annotated[float, typer.Option("--target-tilt", help="Tilt to reach [rad]")],
-    by: Annotated[float, typer.Option("--by", help="Time by which to reach it [s]")],
+    target_tilt: Annotated[float, typer.Option("--target-tilt", parser=number(float),
+                                             help="Tilt to reach [rad]")],
+    by: Annotated[float, typer.Option("--by", parser=number(float),
+                                    help="Time by which to reach it [s]")],
     set_: SetOpt = None,
 ) -> None:
     """The paper's back-of-envelope field for a target tilt (eqs 5.3-5.4, with the node
@@ -192,15 +197,18 @@ def estimate(
 @app.command("design-field")
 def design_field(
     scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name")],
-    target_tilt: Annotated[float, typer.Option("--target-tilt", help="Tilt to reach [rad]")],
-    by: Annotated[float, typer.Option("--by", help="Time by which to reach it [s]")],
+    target_tilt: Annotated[float, typer.Option("--target-tilt", parser=number(float),
+                                             help="Tilt to reach [rad]")],
+    by: Annotated[float, typer.Option("--by", parser=number(float),
+                                    help="Time by which to reach it [s]")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Folder: design.json, the probes' "
                                                           "cases, the figure")],
     workers: WorkersOpt = None,
     scheduler: SchedulerOpt = None,
     threads: ThreadsOpt = None,
     tolerance: Annotated[float, typer.Option(
-        "--tolerance", help="Relative width of the final bracket on the field scale")] = 0.02,
+        "--tolerance", parser=number(float),
+        help="Relative width of the final bracket on the field scale")] = 0.02,
     set_: SetOpt = None,
     json_summary: Annotated[bool, typer.Option("--json", help="Print the result as JSON on "
                                                               "stdout")] = False,
@@ -253,10 +261,11 @@ def ballistic_limit(
                                                  "must break: e.g. `rupture`)")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Folder: ballistic.json, .nc, .png "
                                                           "and the shots' cases")],
-    seeds: Annotated[int, typer.Option("--seeds", help="Seeded shots (modulus scatter and "
-                                                       "impact-point jitter) for V50")] = 0,
+    seeds: Annotated[int, typer.Option(
+        "--seeds", parser=number(int, 0),
+        help="Seeded shots (modulus scatter and impact-point jitter) for V50")] = 0,
     tolerance: Annotated[float, typer.Option(
-        "--tolerance", help="Width of the final V_BL bracket [m/s]")] = 2.0,
+        "--tolerance", parser=number(float), help="Width of the final V_BL bracket [m/s]")] = 2.0,
     workers: WorkersOpt = None,
     scheduler: SchedulerOpt = None,
     threads: ThreadsOpt = None,
