@@ -359,10 +359,7 @@ class Fabric(_Section):
             try:
                 self.ply_fabric(i)
             except ValidationError as err:
-                first = err.errors()[0]
-                where = ".".join(str(x) for x in first["loc"])
-                msg = first["msg"].removeprefix("Value error, ")
-                raise ValueError(f"ply[{i}]{'.' + where if where else ''}: {msg}") from None
+                raise _ply_error(i, err) from None
         return self
 
     def ply_fabric(self, index: int) -> Fabric:
@@ -410,10 +407,15 @@ class Fabric(_Section):
         try:
             return Fabric.model_validate({**base, **over})
         except ValidationError as err:
-            first = err.errors()[0]
-            where = ".".join(str(x) for x in first["loc"])
-            msg = first["msg"].removeprefix("Value error, ")
-            raise ValueError(f"ply[{index}]{'.' + where if where else ''}: {msg}") from None
+            raise _ply_error(index, err) from None
+
+
+def _ply_error(index: int, err: ValidationError) -> ValueError:
+    """A ply's fabric that does not validate: its first error, naming the ply and the key."""
+    first = err.errors()[0]
+    where = ".".join(str(x) for x in first["loc"])
+    msg = first["msg"].removeprefix("Value error, ")
+    return ValueError(f"ply[{index}]{'.' + where if where else ''}: {msg}")
 
 
 class _MaterialOverride(_Section):
@@ -438,7 +440,6 @@ class _MaterialOverride(_Section):
     H: PositiveFloat | None = None
     """Fung constant H [-]."""
 
-
     @field_validator("name")
     @classmethod
     def _known_material(cls, v: str | None) -> str | None:
@@ -447,6 +448,7 @@ class _MaterialOverride(_Section):
 
             library_material(v)  # ValueError naming the allowed names
         return v
+
 
 class _DamageOverride(_Section):
     law: Literal["zohdi", "brittle"] | None = None
