@@ -86,6 +86,7 @@ def test_study_cases_run_on_the_threads_asked_for(monkeypatch):
     from emfabric.studies.sweep import run_case
 
     seen = []
+    before = numba.get_num_threads()  # run_case sets it: restored at the end
 
     def fake_run(sc, out, threads=None):
         seen.append(threads)
@@ -98,15 +99,14 @@ def test_study_cases_run_on_the_threads_asked_for(monkeypatch):
 
     monkeypatch.setattr(logging.getLogger("emfabric.runner.loop"), "filters", [])
     text = _small().to_toml()
-    assert run_case(text, None, 2, explicit=True)["status"] == "failed"
-    assert run_case(text, None, 2)["status"] == "failed"
-    assert seen == [2, None]
 
     class Big:
         node_count = THREADS_FROM_NODES
 
-    before = numba.get_num_threads()
     try:
+        assert run_case(text, None, 2, explicit=True)["status"] == "failed"
+        assert run_case(text, None, 2)["status"] == "failed"
+        assert seen == [2, None]
         numba.set_num_threads(1)
         assert default_threads(Big()) == 1
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
