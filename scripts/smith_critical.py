@@ -42,10 +42,10 @@ def smith_speed(eps: float) -> float:
     return math.sqrt(2.0 * u * ul * w - w * w)
 
 
-def breaks(speed: float, eps_f: float, radius: float | None, friction: float | None,
-           until: float) -> bool:
-    """Whether a yarn breaks within `until` of the impact at `speed` (radius None: the driven
-    node)."""
+def struck_yarn(speed: float, eps_f: float, radius: float | None, friction: float | None):
+    """(model, initial state) of the test yarn of brittle yarns with failure strain eps_f, struck
+    at `speed` by the driven middle node (radius None) or by a 5 kg sphere of that radius
+    (friction: static and dynamic, None for the scenario's)."""
     lin = RHO * math.pi * R**2
     ly = 2 * HY
     keys = {"fabric.rescale": False, "fabric.material.modulus_cv": 0.0, "field.B": [0, 0, 0],
@@ -68,6 +68,14 @@ def breaks(speed: float, eps_f: float, radius: float | None, friction: float | N
         model.nodes.mass[mid] *= 1e9
         model.nodes.inv_mass[mid] /= 1e9
         s.node_v[2, mid] = -speed
+    return model, s
+
+
+def breaks(speed: float, eps_f: float, radius: float | None, friction: float | None,
+           until: float) -> bool:
+    """Whether a yarn breaks within `until` of the impact at `speed` (radius None: the driven
+    node)."""
+    model, s = struck_yarn(speed, eps_f, radius, friction)
     integ = make_integrator(model)
     s2 = s.copy()
     touched = None

@@ -21,10 +21,7 @@ import numpy as np
 import smith_critical as S
 from scipy.optimize import brentq
 
-from emfabric.config.scenario import Scenario
 from emfabric.integrators import make_integrator
-from emfabric.sim.builder import build_model
-from emfabric.sim.state import initial_state
 
 EPS_F = 0.02
 CASES = [(None, None), (0.002, None), (0.005, None), (0.02, None), (0.003, 0.0), (0.01, 0.0)]
@@ -33,28 +30,7 @@ CASES = [(None, None), (0.002, None), (0.005, None), (0.02, None), (0.003, 0.0),
 
 def strains(speed: float, radius: float | None, friction: float | None, until: float = 10e-6):
     """(times [s], strains (steps, segments) of the struck row, time of first contact [s])."""
-    lin = S.RHO * math.pi * S.R**2
-    ly = 2 * S.HY
-    keys = {"fabric.rescale": False, "fabric.material.modulus_cv": 0.0, "field.B": [0, 0, 0],
-            "fabric.nodes": [S.NX, 3], "fabric.size": [(S.NX - 1) * S.H, ly],
-            "fabric.areal_density": lin * S.H * (3 * S.NX) / ((S.NX - 1) * S.H * ly),
-            "fabric.yarn_radius": S.R, "fabric.material.youngs_modulus": S.E,
-            "fabric.damage.law": "brittle", "fabric.damage.failure_strain": 5.0}  # no failure
-    if radius is None:
-        keys["projectile.shape"] = "none"
-    else:
-        keys.update({"projectile.shape": "sphere", "projectile.radius": radius,
-                     "projectile.mass": 5.0, "projectile.velocity": [0.0, 0.0, -speed]})
-        if friction is not None:
-            keys.update({"contact.static_friction": friction,
-                         "contact.dynamic_friction": friction})
-    model = build_model(Scenario().replace(**keys))
-    s = initial_state(model)
-    if radius is None:
-        mid = S.NX + S.NX // 2
-        model.nodes.mass[mid] *= 1e9
-        model.nodes.inv_mass[mid] /= 1e9
-        s.node_v[2, mid] = -speed
+    model, s = S.struck_yarn(speed, 5.0, radius, friction)  # ε_f = 5: no failure
     integ = make_integrator(model)
     s2 = s.copy()
     a, b = model.yarns.ends[:, 0], model.yarns.ends[:, 1]

@@ -22,6 +22,7 @@ from typing import Annotated, Any, Literal, Union, get_args, get_origin
 
 import tomli_w
 from pydantic import (
+    AfterValidator,
     BaseModel,
     ConfigDict,
     Field,
@@ -36,6 +37,29 @@ PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 FiniteVec3 = tuple[FiniteFloat, FiniteFloat, FiniteFloat]
+
+
+def _library_material_name(v: str | None) -> str | None:
+    if v is not None:
+        from emfabric.config.library import library_material
+
+        library_material(v)  # ValueError naming the allowed names
+    return v
+
+
+def _fabric_style_name(v: str | None) -> str | None:
+    if v is not None:
+        from emfabric.config.library import fabric_style
+
+        fabric_style(v)  # ValueError naming the allowed styles
+    return v
+
+
+MaterialName = Annotated[str | None, AfterValidator(_library_material_name)]
+"""A material of the library (emfabric.config.library), or None."""
+StyleName = Annotated[str | None, AfterValidator(_fabric_style_name)]
+"""A fabric style of the library, or None."""
+
 
 
 class ScenarioError(ValueError):
@@ -61,7 +85,7 @@ def _set_unset(section: BaseModel, values: dict[str, Any]) -> None:
 
 
 class MaterialSpec(_Section):
-    name: str | None = None
+    name: MaterialName = None
     """A library material (`emfabric materials`; docs/materials.md): "zylon" (the paper's),
     "zylon-as", "kevlar-29", "kevlar-49", "kevlar-km2", "twaron", "dyneema-sk76"; it supplies
     youngs_modulus, density, tensile_strength and failure_strain where they are not written."""
@@ -85,15 +109,6 @@ class MaterialSpec(_Section):
     pressure)."""
     failure_strain: PositiveFloat | None = None
     """Engineering strain at break [-] (the library's; the default of damage.failure_strain)."""
-
-    @field_validator("name")
-    @classmethod
-    def _known_material(cls, v: str | None) -> str | None:
-        if v is not None:
-            from emfabric.config.library import library_material
-
-            library_material(v)  # ValueError naming the allowed names
-        return v
 
     @model_validator(mode="after")
     def _fung_needs_constants(self) -> MaterialSpec:
@@ -177,7 +192,7 @@ class Fabric(_Section):
     ply: tuple[PlySpec, ...] = ()
     """Per-ply overrides ([[fabric.ply]] tables, one per ply, in order from the top): any
     fabric key that is not the frame's geometry."""
-    style: str | None = None
+    style: StyleName = None
     """A fabric from its datasheet (`emfabric materials`; docs/materials.md), e.g.
     "km2-600d-plain": supplies material.name, yarn_linear_density, thread_count and
     areal_density where they are not written."""
@@ -190,15 +205,6 @@ class Fabric(_Section):
     """Ends and picks per cm [1/cm] (warp yarns run along x, ends/cm counted along y): the yarn
     spacing. Where reference_nodes is not written it is one network line per yarn on this
     sheet, and where nodes is not written the network is that one."""
-
-    @field_validator("style")
-    @classmethod
-    def _known_style(cls, v: str | None) -> str | None:
-        if v is not None:
-            from emfabric.config.library import fabric_style
-
-            fabric_style(v)  # ValueError naming the allowed styles
-        return v
 
     @model_validator(mode="after")
     def _datasheet(self) -> Fabric:
@@ -419,7 +425,7 @@ def _ply_error(index: int, err: ValidationError) -> ValueError:
 
 
 class _MaterialOverride(_Section):
-    name: str | None = None
+    name: MaterialName = None
     """A library material for this ply (its values replace those the pack's came with)."""
     model: Literal["kirchhoff-saint-venant", "fung"] | None = None
     """Must equal fabric.material.model."""
@@ -439,15 +445,6 @@ class _MaterialOverride(_Section):
     """Fung constant c [Pa]."""
     H: PositiveFloat | None = None
     """Fung constant H [-]."""
-
-    @field_validator("name")
-    @classmethod
-    def _known_material(cls, v: str | None) -> str | None:
-        if v is not None:
-            from emfabric.config.library import library_material
-
-            library_material(v)  # ValueError naming the allowed names
-        return v
 
 
 class _DamageOverride(_Section):
@@ -478,7 +475,7 @@ class PlySpec(_Section):
     """As fabric.rescale, for this ply."""
     reference_nodes: tuple[Annotated[int, Field(ge=2)], Annotated[int, Field(ge=2)]] | None = None
     """As fabric.reference_nodes, for this ply."""
-    style: str | None = None
+    style: StyleName = None
     """This ply's fabric from its datasheet (as fabric.style): it supplies this ply's
     material.name, yarn_linear_density, thread_count and areal_density (and from them its
     yarn_radius, reference_nodes and nodes) where this table does not write them."""
@@ -490,15 +487,6 @@ class PlySpec(_Section):
     """Ends and picks per cm [1/cm] (as fabric.thread_count), for this ply."""
     material: _MaterialOverride | None = None
     damage: _DamageOverride | None = None
-
-    @field_validator("style")
-    @classmethod
-    def _known_style(cls, v: str | None) -> str | None:
-        if v is not None:
-            from emfabric.config.library import fabric_style
-
-            fabric_style(v)  # ValueError naming the allowed styles
-        return v
 
 
 DATASHEET_KEYS = ("style", "yarn_linear_density", "yarn_denier", "thread_count")
