@@ -72,3 +72,22 @@ def test_output_volume_limit_applies_only_to_runs_that_write(tmp_path):
     with pytest.raises(ScenarioError, match="above output.size_limit"):
         run(sc, tmp_path / "out", end_time=2e-8)
     assert not (tmp_path / "out" / "history.nc").exists()
+
+
+@pytest.mark.parametrize("command", [["validate"], ["run", "-q", "--set",
+                                                   "solver.end_time=1e-7"]])
+def test_cli_prints_a_typing_mistake_as_a_warning(tmp_path, command):
+    """`validate` and `run` print the model's warnings as every other warning reads:
+    "warning: …" on stderr (validate printed them bare, through Python's last-resort handler)."""
+    import os
+    import subprocess
+    import sys
+
+    args = [sys.executable, "-m", "emfabric", command[0], "demo-small", "--set",
+            "projectile.mass=37", "--set", "fabric.nodes=[11,11]", *command[1:]]
+    if command[0] == "run":
+        args += ["--out", str(tmp_path / "out")]
+    r = subprocess.run(args, capture_output=True, text=True,
+                       env={**os.environ, "COLUMNS": "300"})
+    assert r.returncode == 0, r.stderr
+    assert "warning: projectile.mass = 37 kg is far outside ballistic projectiles" in r.stderr

@@ -91,10 +91,19 @@ def show_messages() -> None:
 
     from rich.logging import RichHandler
 
+    class Prefixed(logging.Formatter):
+        """A warning reads "warning: …", as the command's own warnings do (cli.run.warn)."""
+
+        def format(self, record: logging.LogRecord) -> str:
+            text = super().format(record)
+            return f"warning: {text}" if record.levelno == logging.WARNING else text
+
     logger = logging.getLogger("emfabric")
     if not any(isinstance(h, RichHandler) for h in logger.handlers):
-        logger.addHandler(RichHandler(console=console, show_time=False, show_path=False,
-                                      show_level=False, markup=False))
+        handler = RichHandler(console=console, show_time=False, show_path=False,
+                              show_level=False, markup=False)
+        handler.setFormatter(Prefixed())
+        logger.addHandler(handler)
     logger.setLevel(logging.INFO)
 
 

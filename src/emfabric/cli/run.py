@@ -207,6 +207,8 @@ def validate(
     sc = _load(scenario, set_)
     from emfabric.sim.builder import build_model
 
+    show_messages()  # the model's warnings (a typing mistake?) as `run` shows them
+
     try:
         model = build_model(sc)
     except ScenarioError as err:
