@@ -534,3 +534,31 @@ def travel_limit(phys, vmax, lo, hi, b_state):
     if speed > 0.0:
         limit = min(limit, CONTACT_TRAVEL * thinnest_radius(body) / speed)
     return limit
+
+
+@njit(cache=True)
+def contact_tally(nc, c_node, c_node2, ply_nodes, mark, per_ply):
+    """The step's contact list (c_node, c_node2 of its nc contacts) counted: per ply, the
+    distinct fabric nodes in contact with the projectile, directly or as an end of a yarn
+    segment in contact, into per_ply; returns the number of segment contacts. `mark` (one
+    entry a node, all 0) is left all 0."""
+    for p in range(per_ply.shape[0]):
+        per_ply[p] = 0
+    segments = 0
+    for k in range(nc):
+        if c_node2[k] >= 0:
+            segments += 1
+        for end in range(2):
+            n = c_node[k] if end == 0 else c_node2[k]
+            if n < 0 or mark[n] != 0:
+                continue
+            mark[n] = 1
+            p = 0
+            while n >= ply_nodes[p + 1]:
+                p += 1
+            per_ply[p] += 1
+    for k in range(nc):
+        mark[c_node[k]] = 0
+        if c_node2[k] >= 0:
+            mark[c_node2[k]] = 0
+    return segments

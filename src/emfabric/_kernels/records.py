@@ -48,12 +48,13 @@ HISTORY_VARIABLES = (
     ("kinetic_energy_fabric", 1), ("strain_energy", 1), ("broken_yarns", 1), ("min_damage", 1),
     *((name, 1) for name in ENERGY_TERMS),
     ("energy_balance_error", 1), ("yaw", 1), ("contact_force", 3), ("field_B", 3),
-    ("field_E", 3),
+    ("field_E", 3), ("contact_segments", 1),
 )
 """The history record's variables and widths (3: an xyz vector), in the order of its columns
 after the time (column 0): the one layout the record kernel (diagnostics.history_row) writes and
-the recorder (emfabric.io.history) reads. The last two, the applied field at the projectile, are
-filled after the kernel by emfabric.sim.diagnostics (the field sources' Python side)."""
+the recorder (emfabric.io.history) reads. The last three, the applied field at the projectile
+and the segments in contact, are filled after the kernel by emfabric.sim.diagnostics (the field
+sources' Python side; the integrator's count of its contact list)."""
 
 
 def _history_columns() -> dict[str, int]:
@@ -98,6 +99,7 @@ COL_YAW = HISTORY_COLUMN["yaw"]
 COL_CONTACT_FORCE = HISTORY_COLUMN["contact_force"]
 COL_FIELD_B = HISTORY_COLUMN["field_B"]
 COL_FIELD_E = HISTORY_COLUMN["field_E"]
+COL_CONTACT_SEGMENTS = HISTORY_COLUMN["contact_segments"]
 
 MATERIAL_KSV, MATERIAL_FUNG = 0, 1
 DAMAGE_ZOHDI, DAMAGE_BRITTLE = 0, 1

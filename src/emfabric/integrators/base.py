@@ -15,7 +15,9 @@ import numba
 import numpy as np
 
 from emfabric._kernels import is_compiled, mark_compiled
+from emfabric._kernels.contact import contact_tally
 from emfabric._kernels.nodes import ROWBUF_ROWS, ROWS_PER_BLOCK
+from emfabric.sim.fastcall import Direct
 from emfabric.sim.model import Model
 from emfabric.sim.state import State
 
@@ -105,6 +107,11 @@ class IntegratorBase(ABC):
         code out of the compiled kernel (a single sheet's step kernel does not compile ply
         contact: seconds off a cold start). Each combination is its own compiled kernel."""
         self._use_threads(threads)
+        self._tally = Direct(contact_tally)
+        self._mark = np.zeros(model.node_count, dtype=np.int8)
+        self.contacts_per_ply = np.zeros(model.ply_count, dtype=np.int64)
+        """Per ply, the fabric nodes in contact after the last step (contact_tally)."""
+        self._tallied: tuple[State | None, int] = (None, -1)
 
     @abstractmethod
     def step(self, s_in: State, s_out: State, *, dt_limit: float = math.inf) -> StepInfo:
@@ -115,6 +122,28 @@ class IntegratorBase(ABC):
         the step that wrote it computed them on the way, else None (the history record then
         computes them). Valid until the next step."""
         return None
+
+    def contacts_of(self, state: State) -> np.ndarray | None:
+        """Per ply, the fabric nodes in contact with the projectile in `state` if the last step
+        wrote it (the history's contact_nodes_per_ply), else None. Valid until the next step."""
+        if state is self._tallied[0] and state.steps == self._tallied[1]:
+            return self.contacts_per_ply
+        return None
+
+    def _count_contacts(self, s_out: State, nc: int) -> None:
+        """The accepted step's contacts (its `nc` entries of work.c_node, c_node2) counted into
+        s_out: contact_count the distinct nodes touching, contact_segments the segments."""
+        if nc == 0:
+            self.contacts_per_ply[:] = 0
+            segments = 0
+        else:
+            work = self.work  # type: ignore[attr-defined]
+            segments = self._tally(None, nc, work.c_node, work.c_node2,
+                                   self.model.nodes.ply_nodes, self._mark,
+                                   self.contacts_per_ply)
+        s_out.contact_count = int(self.contacts_per_ply.sum())
+        s_out.contact_segments = int(segments)
+        self._tallied = (s_out, s_out.steps)
 
     def variant(self, threaded: bool | None = None) -> str:
         """Name of the compiled step kernels this integrator runs (or would run threaded)."""

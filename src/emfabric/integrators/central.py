@@ -132,12 +132,12 @@ class CentralDifference(IntegratorBase):
         s_out.t = s_in.t + dt
         s_out.energy_initial = s_in.energy_initial
         s_out.steps = s_in.steps + 1
+        self._count_contacts(s_out, nc)
         s_out.rejected = s_in.rejected + rejected
         s_out.evaluations = s_in.evaluations + 1 + rejected
         s_out.iterations = 1
         s_out.error = 0.0
         s_out.last_dt = dt
-        s_out.contact_count = nc
         s_out.contact_steps = s_in.contact_steps + (1 if nc > 0 else 0)
         s_out.contact_force[:] = self.work.reaction[0] / dt
         s_out.dt = self.stable_dt(s_out, crit, travel)

@@ -144,12 +144,12 @@ class Integrator(IntegratorBase):
                      self.solver.phi, dt, s_out.energy)
         s_out.energy_initial = s_in.energy_initial
         s_out.steps = s_in.steps + 1
+        self._count_contacts(s_out, nc)
         s_out.rejected = s_in.rejected + rejected
         s_out.evaluations = s_in.evaluations + evaluations
         s_out.iterations = k
         s_out.error = err
         s_out.last_dt = dt
-        s_out.contact_count = nc
         s_out.contact_steps = s_in.contact_steps + (1 if nc > 0 else 0)
         s_out.contact_force[:] = self.work.reaction[0] / dt
         self._after_step(time.perf_counter() - clock)

@@ -26,6 +26,10 @@ from emfabric.sim.state import State
 
 CHECKPOINT = "checkpoint.nc"
 FORMAT = 3  # 2: the State holds node_e; 3: node_contact
+_ADDED = {"contact_segments": 0}
+"""State fields added since format 3 was written, with the value a checkpoint without them
+reads as (it describes the step that wrote the checkpoint, which the resumed run does not
+record again)."""
 _DIMS = {"node_x": ("xyz", "node"), "node_v": ("xyz", "node"), "node_f": ("xyz", "node"),
          "node_e": ("xyz", "node"), "node_contact": ("contact_row", "node"),
          "seg_alpha": ("segment",), "body": ("body_row", "xyz"), "energy": ("energy_term",),
@@ -105,6 +109,9 @@ def read_checkpoint(path: Path) -> tuple[Scenario, str, State, RunPosition]:
                               f"({err})") from None
     values = {}
     for f in fields(State):
+        if f.name not in ds and f.name in _ADDED:
+            values[f.name] = _ADDED[f.name]
+            continue
         if f.name not in ds:
             raise CheckpointError(f"{path}: checkpoint lacks the State field {f.name!r}")
         var = ds[f.name].values

@@ -22,7 +22,7 @@ from emfabric.sim.model import Model
 
 VARIABLES = RECORD
 INTEGER_VARIABLES = ("iterations", "rejected_steps", "force_evaluations", "contact_nodes",
-                     "broken_yarns")
+                     "contact_segments", "broken_yarns")
 
 
 

@@ -243,7 +243,7 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
             info = integ.step(s_in, s_out, dt_limit=t_end - s_in.t)
             s_in, s_out = s_out, s_in
             row = recorder.new_row()
-            fab = measure(model, s_in, row, integ.fabric_of(s_in))
+            fab = measure(model, s_in, row, integ.fabric_of(s_in), integ.contacts_of(s_in))
             wrong = check_plausible(model, s_in, row, lim)
             if wrong is not None:
                 raise DivergenceError(

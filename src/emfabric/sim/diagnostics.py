@@ -17,6 +17,7 @@ from emfabric._kernels import diagnostics as _k
 from emfabric._kernels.fields import fields_at_points
 from emfabric._kernels.records import (
     COL_BALANCE,
+    COL_CONTACT_SEGMENTS,
     COL_DEFLECTION,
     COL_FIELD_B,
     COL_FIELD_E,
@@ -45,8 +46,8 @@ ATTRIBUTES: dict[str, tuple[str, str]] = {
     "angular_velocity": ("rad s-1", "projectile angular velocity (inertial frame)"),
     "projectile_nose": ("m", "nose marker relative to the centre of mass"),
     "tilt": ("rad", "tilt angle of the nose marker (eq. 5.2)"),
-    "contact_nodes": ("1", "fabric nodes in contact (plus yarn segments in contact, with "
-                              "segment contact on)"),
+    "contact_nodes": ("1", "fabric nodes in contact with the projectile (touching it, or an "
+                              "end of a yarn segment that touches it)"),
     "max_deflection": ("m", "largest out-of-plane node displacement"),
     "max_stretch": ("1", "largest stretch U = L/L0 of the yarns not broken"),
     "fabric_momentum": ("kg m s-1", "linear momentum of the fabric"),
@@ -73,6 +74,7 @@ ATTRIBUTES: dict[str, tuple[str, str]] = {
     "field_B": ("T", "magnetic field at the projectile's centre of mass (the sheet's centre "
                         "without a projectile)"),
     "field_E": ("V m-1", "electric field there (the induced E of a pulsed coil included)"),
+    "contact_segments": ("1", "yarn segments in contact with the projectile (contact.segments)"),
 }
 """Units and long name of each history variable (netCDF attributes)."""
 
@@ -90,7 +92,8 @@ PLY_RECORD: dict[str, tuple[str, str]] = {
     "broken_yarns_per_ply": ("1", "yarns of each ply with damage α below "
                                   "fabric.damage.broken_below"),
     "max_deflection_per_ply": ("m", "largest out-of-plane node displacement of each ply"),
-    "contact_nodes_per_ply": ("1", "nodes of each ply in contact with the projectile"),
+    "contact_nodes_per_ply": ("1", "nodes of each ply in contact with the projectile (as "
+                                   "contact_nodes)"),
 }
 """The per-ply history variables (time, ply): name -> (units, long name). A history row holds
 them after the COLUMNS of RECORD, one block of `plies` columns each, in this order."""
@@ -139,7 +142,8 @@ _DIRECT: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def _record(model: Model, state: State, row: np.ndarray, e_initial: float,
-            fabric: np.ndarray | None = None) -> tuple[FabricDiagnostics, float]:
+            fabric: np.ndarray | None = None,
+            contacts: np.ndarray | None = None) -> tuple[FabricDiagnostics, float]:
     direct = _DIRECT.get(model)
     if direct is None:
         direct = _DIRECT[model] = (Direct(_k.fabric_diagnostics), Direct(_k.history_row),
@@ -167,13 +171,17 @@ def _record(model: Model, state: State, row: np.ndarray, e_initial: float,
         direct[2](None, fld, pts, float(state.t), e, b)
     row[COL_FIELD_B:COL_FIELD_B + 3] = b[0]
     row[COL_FIELD_E:COL_FIELD_E + 3] = e[0]
-    _per_ply(model, state, row)
+    row[COL_CONTACT_SEGMENTS] = state.contact_segments
+    _per_ply(model, state, row, contacts)
     return FabricDiagnostics._make(out.tolist()), float(e0)
 
 
-def _per_ply(model: Model, state: State, row: np.ndarray) -> None:
+def _per_ply(model: Model, state: State, row: np.ndarray,
+             contacts: np.ndarray | None = None) -> None:
     """The per-ply columns of a history row (PLY_RECORD): one pass of NumPy over the nodes and
-    segments, reduced per ply; a single sheet copies its totals."""
+    segments, reduced per ply; a single sheet copies its totals. contacts: the nodes in contact
+    per ply, where the integrator counted them (its contacts_of), else from the state's contact
+    flags."""
     plies = model.ply_count
     lay = ply_layout(plies)
     if plies == 1:
@@ -187,18 +195,24 @@ def _per_ply(model: Model, state: State, row: np.ndarray) -> None:
     row[lay["broken_yarns_per_ply"]] = np.add.reduceat(broken.astype(np.int64), first_seg)
     row[lay["max_deflection_per_ply"]] = np.maximum.reduceat(
         np.abs(state.node_x[2] - nodes.x0[2]), first_node)
-    touching = state.node_contact[3] != 0.0
-    row[lay["contact_nodes_per_ply"]] = np.add.reduceat(touching.astype(np.int64), first_node)
+    if contacts is not None:
+        row[lay["contact_nodes_per_ply"]] = contacts
+    else:
+        touching = state.node_contact[3] != 0.0
+        row[lay["contact_nodes_per_ply"]] = np.add.reduceat(touching.astype(np.int64),
+                                                            first_node)
 
 
 
 def measure(model: Model, state: State, row: np.ndarray,
-            fabric: np.ndarray | None = None) -> FabricDiagnostics:
+            fabric: np.ndarray | None = None,
+            contacts: np.ndarray | None = None) -> FabricDiagnostics:
     """Fill `row` (row_width(model.ply_count) columns) with the history record of `state` (the
     order of RECORD, then PLY_RECORD) and return the fabric diagnostics it was made from.
     fabric: those diagnostics (the kernel's order) where the step that wrote the state
-    computed them (the integrator's fabric_of), else they are computed here."""
-    return _record(model, state, row, state.energy_initial, fabric)[0]
+    computed them (the integrator's fabric_of), else they are computed here; contacts: the
+    nodes in contact per ply where the integrator counted them (its contacts_of)."""
+    return _record(model, state, row, state.energy_initial, fabric, contacts)[0]
 
 
 def held_nodes(model: Model, alpha: np.ndarray) -> np.ndarray:

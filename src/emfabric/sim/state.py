@@ -68,7 +68,11 @@ class State:
     last_dt: float = 0.0
     """The last accepted step [s]."""
     contact_count: int = 0
-    """Nodes in contact after the last step."""
+    """Distinct fabric nodes in contact with the projectile after the last step: touching it,
+    or an end of a yarn segment that touches it (history: contact_nodes)."""
+    contact_segments: int = 0
+    """Yarn segments in contact with the projectile after the last step (contact.segments;
+    history: contact_segments)."""
     contact_steps: int = 0
     """Accepted steps that ended with a node in contact (0: the projectile never touched)."""
     energy: np.ndarray = field(default_factory=lambda: np.zeros(len(ENERGY_TERMS)))
