@@ -4,7 +4,9 @@
 
 Runs in a fresh kernel cache (a temporary NUMBA_CACHE_DIR) and prints the launch-to-first-step
 time and the inclusive compile time of every kernel (a kernel's time includes the callees it
-compiled first). NUMBA_NUM_THREADS=1 shows the serial path alone.
+compiled first). NUMBA_NUM_THREADS=1 shows the serial path alone; EMFABRIC_PRECOMPILE=0 leaves
+out the second process that compiles part of the kernels beside the run (runner.precompile):
+the kernels it compiles are then listed here too.
 """
 
 from __future__ import annotations

@@ -2,6 +2,7 @@
 chosen when a kernel first asks, not when the package is imported; Numba's private caching
 names that this relies on are checked."""
 
+import json
 import os
 import shutil
 import subprocess
@@ -230,3 +231,65 @@ def test_installed_numba_has_the_names_and_installing_again_replaces(monkeypatch
         pass
 
     assert not isinstance(caching.CompileResultCacheImpl(elsewhere).locator, again)
+
+
+PRECOMPILED_RUN = """
+import json, logging
+from numba.core import event
+rec = event.RecordingListener()
+event.register("numba:compile", rec)
+from emfabric import load_scenario, run
+from emfabric.integrators import make_integrator
+from emfabric.sim.builder import build_model
+from emfabric.sim.state import blank_state
+logging.disable(logging.WARNING)
+sc = load_scenario("pack-fsp", {"fabric.plies": 2, "fabric.nodes": [21, 21],
+                                "solver.end_time": 2e-7})
+model = build_model(sc, writes=False)
+targets = {k.py_func.__qualname__
+           for k, _a in make_integrator(model, threads=1).precompile_targets(blank_state(model))}
+run(sc, threads=1)
+here = {ev.data["dispatcher"].py_func.__qualname__ for _ts, ev in rec.buffer if ev.is_start}
+print(json.dumps(sorted(targets)))
+print(json.dumps(sorted(targets & here)))
+"""
+
+
+def test_a_second_process_compiles_what_the_step_kernel_then_loads(tmp_path):
+    """On a cold cache a run has a second process compile the step kernel's largest callees
+    (runner.precompile) into the cache. Their argument types must be the ones the step kernel
+    passes, or the run compiles them again: after the second process has finished, a run of a
+    pack struck by an FSP (ply and segment contact: every target) compiles none of them."""
+    env = {"NUMBA_CACHE_DIR": str(tmp_path), "EMFABRIC_PRECOMPILE": "0"}
+    text = subprocess.run(
+        [sys.executable, "-c", "from emfabric import load_scenario; print(load_scenario("
+         "'pack-fsp', {'fabric.plies': 2, 'fabric.nodes': [21, 21], 'solver.end_time': 2e-7})"
+         ".to_toml())"], env=_env(env), capture_output=True, text=True, check=True).stdout
+    subprocess.run([sys.executable, "-m", "emfabric.runner.precompile"], input=text,
+                   env=_env(env), capture_output=True, text=True, check=True)
+    out = _run(PRECOMPILED_RUN, env).splitlines()
+    targets, compiled_again = json.loads(out[-2]), json.loads(out[-1])
+    assert {"drift_rows", "_node_contact", "ply_contact", "segment_contact"} <= set(targets)
+    assert compiled_again == []
+
+
+def test_the_second_process_is_started_only_where_it_can_help(monkeypatch):
+    """Not with EMFABRIC_PRECOMPILE=0, not on one core, not inside a Dask worker (a study's
+    other cases use the cores)."""
+    import types
+
+    from emfabric.runner import precompile
+
+    monkeypatch.delenv("EMFABRIC_PRECOMPILE", raising=False)
+    monkeypatch.setattr(os, "cpu_count", lambda: 4)
+    outside = types.SimpleNamespace(get_worker=lambda: (_ for _ in ()).throw(ValueError()))
+    monkeypatch.setitem(sys.modules, "distributed", outside)
+    assert precompile.wanted()
+    monkeypatch.setitem(sys.modules, "distributed", types.SimpleNamespace(get_worker=object))
+    assert not precompile.wanted()
+    monkeypatch.setitem(sys.modules, "distributed", outside)
+    monkeypatch.setenv("EMFABRIC_PRECOMPILE", "0")
+    assert not precompile.wanted()
+    monkeypatch.delenv("EMFABRIC_PRECOMPILE")
+    monkeypatch.setattr(os, "cpu_count", lambda: 1)
+    assert not precompile.wanted()

@@ -154,6 +154,13 @@ class IntegratorBase(ABC):
         plies, segs = self.switches
         return ("-plies" if plies is not None else "") + ("-segments" if segs is not None else "")
 
+    def precompile_targets(self, state: State) -> list[tuple]:
+        """(kernel, arguments) pairs that a second process may compile into the kernel cache
+        while this one compiles the rest (a cold cache: runner.precompile): callees of the
+        serial step kernel, with arguments of the types the step kernel passes them (`state`
+        gives the arrays). [] where the scheme names none."""
+        return []
+
     def _compile_target(self, s_in: State, s_out: State, threads: np.ndarray):
         """(dispatcher, arguments) of the threaded step kernel, for its background compile
         (None: nothing to compile beside the run)."""

@@ -25,6 +25,7 @@ from emfabric._kernels.explicit import (
     central_step,
     stable_step,
 )
+from emfabric._kernels.nodes import ROWBUF_ROWS
 from emfabric._kernels.records import make_work
 from emfabric.integrators.base import IntegratorBase, StepInfo
 from emfabric.sim.fastcall import Direct
@@ -72,6 +73,30 @@ class CentralDifference(IntegratorBase):
         threaded = self.threaded if threaded is None else threaded
         return (f"central-difference-{'threads' if threaded else 'serial'}"
                 + self.switch_suffix())
+
+    def precompile_targets(self, state: State) -> list[tuple]:
+        """The serial step kernel's largest callees, with arguments of the types it passes
+        them (the records, the state's arrays, float64 times, an int64 count); a type that
+        differs only costs the compile here again (tests/test_kernel_cache.py checks them)."""
+        from emfabric._kernels.contact import segment_contact
+        from emfabric._kernels.explicit import _node_contact
+        from emfabric._kernels.nodes import drift_rows
+        from emfabric._kernels.plies import ply_contact
+
+        a, phys, work = state.arrays, self.physics, self.work
+        rowbuf = self.rowbuf if self.rowbuf is not None else np.empty((ROWBUF_ROWS,
+                                                                       self.model.nx + 1))
+        out = [(drift_rows, (phys, a, a, work, 0.0, 0.0, rowbuf)),
+               (_node_contact, (phys, a, a, work, 0))]
+        plies, segs = self.switches
+        if plies is not None:
+            out.append((ply_contact, (phys, a.x, a.v, a.f, work, 0.0, a.contact[3])))
+        if segs is not None:
+            out.append((segment_contact, (phys.nodes, phys.yarns, phys.body, phys.contact,
+                                          a.body, 0, 0, a.x, a.v, work)))
+        out += [(stable_step, (phys, a.x, a.alpha, self.scratch)),
+                (travel_step, (phys, a.x, a.v, a.body))]
+        return out
 
     def _compile_target(self, s_in: State, s_out: State, threads: np.ndarray):
         return central_step, (self.physics, s_in.arrays, s_out.arrays, self.work, None, threads,

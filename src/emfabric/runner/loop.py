@@ -36,6 +36,7 @@ from emfabric.io.history import (
 )
 from emfabric.io.lock import folder_lock
 from emfabric.io.snapshots import Snapshots, snapshot_times, truncate_snapshots
+from emfabric.runner import precompile
 from emfabric.runner.summary import summarize
 from emfabric.sim.builder import build_model
 from emfabric.sim.diagnostics import check_plausible, left_for_good, limits, measure
@@ -157,10 +158,13 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
     integ = make_integrator(model, threads=threads)
     # on a cold kernel cache, run serially and compile the threaded kernel beside the run
     deferred = integ.defer_threads()
+    second = None  # the process that compiles some kernels beside this one (cold cache)
     if not is_compiled(integ.variant()):
         log.info("compiling kernels (first run only, about half a minute; cached in %s)" if
                  cache_persistent() else "compiling kernels (no writable cache folder: "
                  "every run compiles; cached in %s for this process)", cache_dir())
+        if model.scenario is not None and cache_persistent() and precompile.wanted():
+            second = precompile.start(model.scenario.to_toml())
     t_end = end_time if end_time is not None else options.end_time
     interval = options.snapshot_interval
     if resumed is None:
@@ -312,6 +316,10 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
     if integ.compiling_in_background and status != "partial":
         log.info("finishing the threaded kernel's compile for later runs (first run only)")
         integ.finish_background_compile()
+    if second is not None and status == "partial":
+        second.kill()  # interrupted: the cache keeps what it finished (atomic writes)
+    else:
+        precompile.finish(second)
     if error is not None:
         error.result = result  # type: ignore[attr-defined]
         raise error

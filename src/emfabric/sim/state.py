@@ -113,6 +113,18 @@ def initial_state(model: Model) -> State:
     """A fresh State at t = 0 with the non-impulsive forces ψ(0) on nodes and body (the first
     step's explicit part) and the total energy that the energy balance is measured against."""
     m = model
+    st = blank_state(m)
+    update_forces(m, st)
+    st.energy_initial = float(total_energy(m.physics, st.node_x, st.node_v, st.seg_alpha,
+                                           st.body, st.energy, st.body[BODY_X],
+                                           m.flight_direction))
+    return st
+
+
+def blank_state(model: Model) -> State:
+    """The State at t = 0 before its forces are computed (initial_state computes them): the
+    initial positions, velocities and body, zero forces, intact yarns."""
+    m = model
     n, s = m.node_count, m.seg_count
     st = State(
         t=0.0,
@@ -129,10 +141,6 @@ def initial_state(model: Model) -> State:
     st.body[BODY_V] = m.body_v0
     st.body[BODY_W] = m.body_w0
     st.body[BODY_R0:BODY_R0 + 3] = np.eye(3)
-    update_forces(m, st)
-    st.energy_initial = float(total_energy(m.physics, st.node_x, st.node_v, st.seg_alpha,
-                                           st.body, st.energy, st.body[BODY_X],
-                                           m.flight_direction))
     return st
 
 
