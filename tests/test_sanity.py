@@ -91,3 +91,30 @@ def test_cli_prints_a_typing_mistake_as_a_warning(tmp_path, command):
                        env={**os.environ, "COLUMNS": "300"})
     assert r.returncode == 0, r.stderr
     assert "warning: projectile.mass = 37 kg is far outside ballistic projectiles" in r.stderr
+
+
+@pytest.mark.parametrize("overrides, expected", [
+    ({"solver.end_time": 1e300}, r"output.snapshot_interval = 1e-05 s: 1e\+305 snapshots .* "
+                                 r"write about more than 1e300 GB, .* allowed: a longer "
+                                 r"snapshot_interval \(≥ \d\.\d+e\+29\d s\)"),
+    ({"output.snapshot_interval": 5e-324}, r"output.snapshot_interval = 4.94066e-324 s: inf "
+                                           r"snapshots"),
+    ({"fabric.plies": 2, "fabric.ply": [{"thread_count": [1e300, 1e300]}, {}]},
+     r"fabric.nodes = \[.*\]: a run needs about more than 1e290 GiB"),
+    ({"field.sources": [{"kind": "loop", "centre": [0, 0, 1e300], "normal": [0, 0, 1],
+                         "radius": 0.2, "current": 1000.0}]},
+     r"centre = \[0.0, 0.0, 1e\+300\]: allowed: within 10000 m"),
+    ({"field.sources": [{"kind": "loop", "centre": [0, 0, 0.05], "normal": [0, 0, 1],
+                         "radius": 5e-324, "current": 1000.0}]},
+     r"radius = 4.94066e-324 m: allowed: at least 1e-06 m"),
+    ({"field.sources": [{"kind": "solenoid", "centre": [0, 0, 0.05], "axis": [0, 0, 1],
+                         "radius": 0.05, "length": 0.1, "current": 10.0, "turns": 100,
+                         "wire_radius": 1e-300}]},
+     r"wire_radius = 1e-300 m: allowed: at least 1e-08 m"),
+])
+def test_extreme_numbers_are_refused_in_words(overrides, expected):
+    """Numbers far outside any physical run (found by fuzzing the scenario keys) are refused
+    with the key, the value and what is allowed, not an OverflowError or a division by zero
+    inside a kernel."""
+    with pytest.raises(ScenarioError, match=expected):
+        build_model(load_scenario("paper-field", {"fabric.nodes": [10, 10], **overrides}))

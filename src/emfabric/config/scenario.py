@@ -603,11 +603,28 @@ class _Current(_Section):
         elif self.current is None:
             raise ValueError("current [A] is needed")
         radius = getattr(self, "radius", None)
+        if radius is not None and radius < MIN_COIL_RADIUS:
+            raise ValueError(f"radius = {radius:g} m: allowed: at least {MIN_COIL_RADIUS:g} m")
+        if self.wire_radius is not None and self.wire_radius < 0.01 * MIN_COIL_RADIUS:
+            raise ValueError(f"wire_radius = {self.wire_radius:g} m: allowed: at least "
+                             f"{0.01 * MIN_COIL_RADIUS:g} m")
+        centre = getattr(self, "centre", None)
+        if centre is not None and max(abs(c) for c in centre) > SOURCE_REACH:
+            raise ValueError(f"centre = {list(centre)}: allowed: within {SOURCE_REACH:g} m of "
+                             f"the sheet's centre in x, y and z (its field on the sheet is "
+                             f"nil further away)")
         if self.wire_radius is not None and radius is not None and \
                 not self.wire_radius < 0.5 * radius:
             raise ValueError(f"wire_radius = {self.wire_radius}: allowed: below half the radius "
                              f"({0.5 * radius})")
         return self
+
+
+MIN_COIL_RADIUS = 1e-6
+"""Smallest loop or solenoid radius [m] (its default wire radius, 1 % of it, stays a number
+the field's closed forms can divide by)."""
+SOURCE_REACH = 1e4
+"""Farthest a coil's centre may be from the sheet's centre, per coordinate [m]."""
 
 
 class LoopSource(_Current):

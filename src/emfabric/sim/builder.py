@@ -78,8 +78,9 @@ def check_memory(scenario: Scenario) -> None:
     have = memory_available()
     if have is not None and need > 0.8 * have:
         nx, ny = scenario.fabric.nodes
+        gib = f"{need / 2**30:.3g}" if need < 2**1000 else "more than 1e290"
         raise ScenarioError(
-            f"fabric.nodes = [{nx}, {ny}]: a run needs about {need / 2**30:.3g} GiB "
+            f"fabric.nodes = [{nx}, {ny}]: a run needs about {gib} GiB "
             f"({BYTES_PER_NODE} B per node), this machine has {have / 2**30:.3g} GiB; allowed: "
             f"grids up to about {int((0.8 * have / BYTES_PER_NODE) ** 0.5)} × "
             f"{int((0.8 * have / BYTES_PER_NODE) ** 0.5)} nodes here"

@@ -126,23 +126,28 @@ def pre_run_warnings(model) -> list[str]:
     return out
 
 
-def _snapshots(sc) -> int:
-    """Snapshots of a run to end_time: t = 0, interval, 2·interval, …"""
-    return int(sc.solver.end_time / sc.output.snapshot_interval * (1.0 + 1e-12)) + 1
+def _snapshots(sc) -> float:
+    """Snapshots of a run to end_time: t = 0, interval, 2·interval, … (a float: inf where the
+    ratio overflows)."""
+    ratio = sc.solver.end_time / sc.output.snapshot_interval * (1.0 + 1e-12)
+    return float(math.floor(ratio) + 1) if math.isfinite(ratio) else math.inf
 
 
-def output_volume(model) -> int:
-    """Bytes a run of this model writes (estimate): every snapshot in snapshots.nc and, with
-    output.paraview, its .vtu files; the history and checkpoint are small beside them."""
-    sc = model.scenario
-    if sc is None:
-        return 0
-    snapshots = _snapshots(sc)
+def _snapshot_bytes(model) -> int:
+    """Bytes of one snapshot: snapshots.nc's record and, with output.paraview, its .vtu file."""
     per = (SNAPSHOT_BYTES_PER_NODE * model.node_count
            + SNAPSHOT_BYTES_PER_SEGMENT * model.seg_count)
-    if sc.output.paraview:
+    if model.scenario.output.paraview:
         per += VTU_BYTES_PER_NODE * model.node_count
-    return snapshots * per
+    return per
+
+
+def output_volume(model) -> float:
+    """Bytes a run of this model writes (estimate): every snapshot in snapshots.nc and, with
+    output.paraview, its .vtu files; the history and checkpoint are small beside them."""
+    if model.scenario is None:
+        return 0.0
+    return _snapshots(model.scenario) * _snapshot_bytes(model)
 
 
 def check_output_volume(model) -> None:
@@ -157,10 +162,12 @@ def check_output_volume(model) -> None:
     limit = sc.output.size_limit
     if need > limit:
         snapshots = _snapshots(sc)
+        count = f"{snapshots:.0f}" if snapshots < 1e15 else f"{snapshots:.3g}"
+        size = f"{need / 1e9:.3g}" if math.isfinite(need) else "more than 1e300"
         raise ScenarioError(
-            f"output.snapshot_interval = {sc.output.snapshot_interval:g} s: {snapshots} "
+            f"output.snapshot_interval = {sc.output.snapshot_interval:g} s: {count} "
             f"snapshots of {model.node_count} nodes up to solver.end_time = "
-            f"{sc.solver.end_time:g} s would write about {need / 1e9:.3g} GB, above "
+            f"{sc.solver.end_time:g} s would write about {size} GB, above "
             f"output.size_limit = {limit / 1e9:.3g} GB; allowed: a longer snapshot_interval "
-            f"(≥ {sc.solver.end_time * need / limit / snapshots:.3g} s), output.paraview = "
-            f"false, or a larger output.size_limit to ask for it")
+            f"(≥ {sc.solver.end_time * _snapshot_bytes(model) / limit:.3g} s), "
+            f"output.paraview = false, or a larger output.size_limit to ask for it")
