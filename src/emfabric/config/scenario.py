@@ -608,11 +608,10 @@ class _Current(_Section):
         if self.wire_radius is not None and self.wire_radius < 0.01 * MIN_COIL_RADIUS:
             raise ValueError(f"wire_radius = {self.wire_radius:g} m: allowed: at least "
                              f"{0.01 * MIN_COIL_RADIUS:g} m")
-        centre = getattr(self, "centre", None)
-        if centre is not None and max(abs(c) for c in centre) > SOURCE_REACH:
-            raise ValueError(f"centre = {list(centre)}: allowed: within {SOURCE_REACH:g} m of "
-                             f"the sheet's centre in x, y and z (its field on the sheet is "
-                             f"nil further away)")
+        _within_reach("centre", getattr(self, "centre", None))
+        _within_reach("radius", (radius,) if radius is not None else None)
+        length = getattr(self, "length", None)
+        _within_reach("length", (length,) if length is not None else None)
         if self.wire_radius is not None and radius is not None and \
                 not self.wire_radius < 0.5 * radius:
             raise ValueError(f"wire_radius = {self.wire_radius}: allowed: below half the radius "
@@ -624,7 +623,17 @@ MIN_COIL_RADIUS = 1e-6
 """Smallest loop or solenoid radius [m] (its default wire radius, 1 % of it, stays a number
 the field's closed forms can divide by)."""
 SOURCE_REACH = 1e4
-"""Farthest a coil's centre may be from the sheet's centre, per coordinate [m]."""
+"""Farthest a source's centre may be from the sheet's centre, per coordinate, and its largest
+size [m]: its field on the sheet is nil beyond, and the closed forms overflow."""
+MAX_ORIENTATION = 3600.0
+"""Largest rotation vector of a magnet's orientation [deg] (ten turns; any rotation is one of
+at most 180°)."""
+
+
+def _within_reach(key: str, values) -> None:
+    if values is not None and max(abs(c) for c in values) > SOURCE_REACH:
+        raise ValueError(f"{key} = {list(values)}: allowed: at most {SOURCE_REACH:g} m (from "
+                         f"the sheet's centre in x, y and z for a position)")
 
 
 class LoopSource(_Current):
@@ -697,6 +706,12 @@ class MagnetSource(_Section):
             what = "[a, b, c]" if count == 3 else "[d, h]"
             raise ValueError(f'dimension = {list(self.dimension)}: allowed for shape = '
                              f'"{self.shape}": {what}, {count} positive lengths [m]')
+        _within_reach("position", self.position)
+        _within_reach("dimension", self.dimension)
+        turn = math.sqrt(sum(c * c for c in self.orientation))
+        if turn > MAX_ORIENTATION:
+            raise ValueError(f"orientation = {list(self.orientation)}: allowed: a rotation "
+                             f"vector of at most {MAX_ORIENTATION:g} degrees")
         return self
 
 
