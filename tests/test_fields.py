@@ -344,6 +344,16 @@ def test_map_errors_name_the_file_and_what_is_wrong(tmp_path):
     bad = _write_map(tmp_path / "bad.nc", _linear, xs=np.array([0.0, 0.1, 0.1, 0.2, 0.3]))
     with pytest.raises(ScenarioError, match="increasing"):
         build_field(make(**{"field.sources": [{"kind": "map", "file": str(bad)}]}))
+    import xarray as xr
+
+    words = tmp_path / "words.nc"
+    with xr.open_dataset(_write_map(tmp_path / "ok.nc", _linear)) as ds:
+        ds = ds.load()
+    ds["Bx"] = (("x", "y", "z"), np.full(ds["Bx"].shape, "a"))
+    ds.to_netcdf(words)
+    with pytest.raises(ScenarioError, match=r"words.nc'?: Bx holds <U1 values; allowed: "
+                                            r"numbers \[T\]"):
+        build_field(make(**{"field.sources": [{"kind": "map", "file": str(words)}]}))
 
 
 def test_near_axis_series_meets_the_closed_form():

@@ -98,6 +98,15 @@ def build_field(scenario: Scenario) -> Field:
     )
 
 
+def _numbers(values, key: str, path: str, what: str, unit: str) -> np.ndarray:
+    """A map's array as float64, refusing what is not numbers (strings, dates, booleans)."""
+    arr = np.asarray(values)
+    if arr.dtype.kind not in "iuf":
+        raise ScenarioError(f"{key} = {path!r}: {what} holds {arr.dtype} values; allowed: "
+                            f"numbers [{unit}]")
+    return arr.astype(float)
+
+
 def read_field_map(path: str, scale: float, key: str) -> dict:
     """The map_axes, map_size and map_values of a Field record from a netCDF field map
     (coordinates x, y, z [m], increasing; Bx, By, Bz [T], optional Ex, Ey, Ez [V/m]), times
@@ -115,7 +124,7 @@ def read_field_map(path: str, scale: float, key: str) -> dict:
         for name in "xyz":
             if name not in ds.variables or ds[name].ndim != 1:
                 raise ScenarioError(f"{key} = {path!r}: no one-dimensional coordinate {name!r}")
-            a = np.asarray(ds[name].values, dtype=float)
+            a = _numbers(ds[name].values, key, path, f"coordinate {name!r}", "m")
             if a.size < 2 or not np.all(np.isfinite(a)) or np.any(np.diff(a) <= 0):
                 raise ScenarioError(f"{key} = {path!r}: coordinate {name!r} must hold at least "
                                     f"two finite, increasing values [m]")
@@ -131,7 +140,8 @@ def read_field_map(path: str, scale: float, key: str) -> dict:
             if set(var.dims) != {"x", "y", "z"}:
                 raise ScenarioError(f"{key} = {path!r}: {name} has dimensions {var.dims}; "
                                     f"allowed: x, y, z")
-            v = np.asarray(var.transpose("x", "y", "z").values, dtype=float)
+            v = _numbers(var.transpose("x", "y", "z").values, key, path, name,
+                         "T" if name.startswith("B") else "V/m")
             if not np.all(np.isfinite(v)):
                 raise ScenarioError(f"{key} = {path!r}: {name} holds non-finite values")
             values[..., c] = scale * v
