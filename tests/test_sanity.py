@@ -128,3 +128,17 @@ def test_extreme_numbers_are_refused_in_words(overrides, expected):
     inside a kernel."""
     with pytest.raises(ScenarioError, match=expected):
         build_model(load_scenario("paper-field", {"fabric.nodes": [10, 10], **overrides}))
+
+
+def test_an_axis_is_a_direction_whatever_its_length():
+    """projectile.axis = [0, 0, −1e200] is the nose pointing down, as [0, 0, −1] is (its
+    length squared overflowed to a zero direction and a division by zero inside the step
+    kernel); 5e-324 along x is x."""
+    base = {"fabric.nodes": [10, 10], "projectile.shape": "fsp", "projectile.radius": 0.00278,
+            "projectile.mass": 0.0011}
+    ref = build_model(load_scenario("demo-small", {**base, "projectile.axis": [0, 0, -1]}))
+    for axis in ([0, 0, -1e200], [0, 0, -1e-300]):
+        m = build_model(load_scenario("demo-small", {**base, "projectile.axis": axis}))
+        assert (m.body.nose == ref.body.nose).all()
+    tiny = build_model(load_scenario("demo-small", {**base, "projectile.axis": [5e-324, 0, 0]}))
+    assert tiny.body.nose[0] > 0 and tiny.body.nose[1] == tiny.body.nose[2] == 0.0

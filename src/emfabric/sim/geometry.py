@@ -304,6 +304,9 @@ def initial_pose(projectile) -> Pose:
     lead = flight
     if pr.axis is not None:
         axis = np.asarray(pr.axis, dtype=float)
+        big = float(np.abs(axis).max())
+        if big > 0.0:
+            axis = axis / big  # a direction: its length may be anything finite (no overflow)
         length = float(np.linalg.norm(axis))
         if not length > 0.0:
             raise ScenarioError(f"projectile.axis = {list(pr.axis)}: the nose direction must "
