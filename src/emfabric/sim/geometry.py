@@ -304,10 +304,13 @@ def initial_pose(projectile) -> Pose:
     lead = flight
     if pr.axis is not None:
         axis = np.asarray(pr.axis, dtype=float)
-        big = float(np.abs(axis).max())
-        if big > 0.0:
-            axis = axis / big  # a direction: its length may be anything finite (no overflow)
         length = float(np.linalg.norm(axis))
+        big = float(np.abs(axis).max())
+        if big > 0.0 and not 1e-150 < length < 1e150:
+            # a direction: a length whose square over- or underflows is scaled first (an
+            # ordinary axis keeps its bits)
+            axis = axis / big
+            length = float(np.linalg.norm(axis))
         if not length > 0.0:
             raise ScenarioError(f"projectile.axis = {list(pr.axis)}: the nose direction must "
                                 f"be a non-zero vector")
