@@ -34,13 +34,13 @@ def wanted() -> bool:
     if (os.cpu_count() or 1) < 2:
         return False
     dist = sys.modules.get("distributed")  # only a process that imported it can be a worker
-    if dist is not None:
-        try:
-            dist.get_worker()
-            return False
-        except (AttributeError, ValueError):
-            pass
-    return True
+    if dist is None:
+        return True
+    try:
+        dist.get_worker()
+    except (AttributeError, ValueError):  # get_worker raises ValueError outside a worker
+        return True
+    return False
 
 
 def start(scenario_toml: str) -> subprocess.Popen | None:
