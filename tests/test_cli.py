@@ -34,5 +34,33 @@ def test_json_summary_alone_on_stdout(tmp_path):
     r = _run("run", "demo-small", "--out", str(tmp_path / "d"), "--json", "-q",
              "--set", "fabric.nodes=[8,8]", "--set", "solver.end_time=2e-6")
     assert r.returncode == 0, r.stderr
-    summary = json.loads(r.stdout)
+    summary = _strict(r.stdout)
     assert summary["status"] == "complete" and summary["steps"] > 0
+
+
+def _strict(text):
+    """json.loads that refuses NaN and Infinity, as jq and JSON.parse do."""
+    def refuse(word):
+        raise ValueError(f"not JSON: {word}")
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_json_output_is_strict_json_when_a_number_overflows(tmp_path):
+    """A charge whose surface field overflows a double is reported as null in `run --json`,
+    not as the bare word Infinity that JSON readers refuse."""
+    r = _run("run", "demo-small", "--out", str(tmp_path / "d"), "--json", "-q",
+             "--set", "fabric.nodes=[8,8]", "--set", "solver.end_time=1e-7",
+             "--set", "fabric.charge_per_node=1e300")
+    assert r.returncode == 0, r.stderr
+    summary = _strict(r.stdout)
+    assert summary["surface_field_V_m"] is None and summary["charge_plausible"] is False
+    assert summary["surface_charge_C_m2"] > 1e300
+
+
+def test_non_finite_numbers_become_null():
+    from emfabric.io.jsontext import dumps
+
+    np = __import__("numpy")
+    text = dumps({"a": float("nan"), "b": [np.float64(np.inf), np.array([1.5, -np.inf])],
+                  "c": np.int64(3), "d": (2.0, "x")})
+    assert _strict(text) == {"a": None, "b": [None, [1.5, None]], "c": 3, "d": [2.0, "x"]}

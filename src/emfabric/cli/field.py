@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Annotated
 
@@ -10,6 +9,7 @@ import typer
 
 from emfabric.cli.app import EXIT_INPUT, app, emit, error, load_or_exit, number, writing
 from emfabric.config.scenario import ScenarioError
+from emfabric.io import jsontext
 
 _load = load_or_exit
 
@@ -99,6 +99,6 @@ def field(
     e, b = fields_at(fld, at, at_time)
     rows = [{"at": list(p), "E": e[k].tolist(), "B": b[k].tolist()} for k, p in enumerate(at)]
     if len(rows) == 1:
-        emit(json.dumps({"E": rows[0]["E"], "B": rows[0]["B"]}))
+        emit(jsontext.dumps({"E": rows[0]["E"], "B": rows[0]["B"]}))
     else:
-        emit(json.dumps(rows))
+        emit(jsontext.dumps(rows))

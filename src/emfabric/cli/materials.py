@@ -3,7 +3,6 @@ library (emfabric.config.library; docs/materials.md) with units and sources."""
 
 from __future__ import annotations
 
-import json
 from typing import Annotated, Any
 
 import typer
@@ -11,6 +10,7 @@ from rich import box
 from rich.table import Table
 
 from emfabric.cli.app import app, emit, out_console
+from emfabric.io import jsontext
 
 
 def _library() -> dict[str, Any]:
@@ -56,7 +56,7 @@ def materials(
     every number (docs/materials.md)."""
     lib = _library()
     if as_json:
-        emit(json.dumps(lib, indent=2))
+        emit(jsontext.dumps(lib, indent=2))
         return
     mats = Table(title="Materials (fabric.material.name)", box=box.SIMPLE_HEAD)
     mats.add_column("name", no_wrap=True)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import signal
 from pathlib import Path
 from typing import Annotated
@@ -34,6 +33,7 @@ from emfabric.config.scenario import (
     load_scenario,
     parse_override,
 )
+from emfabric.io import jsontext
 
 _load = load_or_exit
 
@@ -165,7 +165,7 @@ def run(
 def _print_summary(result, as_json: bool) -> None:
     s = result.summary
     if as_json:
-        emit(json.dumps(s, indent=2))
+        emit(jsontext.dumps(s, indent=2))
         return
     # user text (scenario name, end reason, paths) is never read as console markup
     table = Table(title=escape(f"{result.model.scenario.name}: {s['status']} "

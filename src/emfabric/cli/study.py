@@ -9,7 +9,6 @@ failed exits 0: those cases are results (results.nc, `status` and `message`)."""
 
 from __future__ import annotations
 
-import json
 import signal
 import time
 from pathlib import Path
@@ -31,6 +30,7 @@ from emfabric.cli.app import (
     number,
     writing,
 )
+from emfabric.io import jsontext
 
 WorkersOpt = Annotated[int | None, typer.Option(
     "--workers", parser=number(int, 1),
@@ -158,7 +158,7 @@ def sweep(
         bar.update(task, completed=len(plan.cases))
     summary = outcome.summary()
     if json_summary:
-        emit(json.dumps(summary))
+        emit(jsontext.dumps(summary))
     else:
         console.print(f"{summary['cases']} cases: {summary['ran']} ran, {summary['reused']} "
                       f"reused, {summary['failed']} failed or diverged; results in "
@@ -191,7 +191,7 @@ def estimate(
     except ValueError as err:
         error(str(err))
         raise typer.Exit(EXIT_INPUT) from None
-    emit(json.dumps(est.as_dict()))
+    emit(jsontext.dumps(est.as_dict()))
 
 
 @app.command("design-field")
@@ -240,14 +240,14 @@ def design_field(
     except (StudyError, ValueError) as err:
         error(str(err))
         raise typer.Exit(EXIT_FAILED if rounds else EXIT_INPUT) from None
-    text = json.dumps(res, indent=1)
+    text = jsontext.dumps(res, indent=1)
     from emfabric.viz.study_plots import design_figure
 
     with writing(out):
         write_atomic(out / "design.json", lambda tmp: tmp.write_text(text, encoding="utf-8"))
         fig = design_figure(res, out / "design.png")
     if json_summary:
-        emit(json.dumps({k: res[k] for k in ("scale", "B_centre", "estimate_eq54",
+        emit(jsontext.dumps({k: res[k] for k in ("scale", "B_centre", "estimate_eq54",
                                               "target_tilt", "by", "runs")}))
     else:
         console.print(f"field × {res['scale']:.4g} (|B| = {res['B_centre_norm']:.4g} T at the "
@@ -318,7 +318,7 @@ def ballistic_limit(
                       highlight=False, soft_wrap=True)
     if json_summary:
         keep = ("v_bl", "v_bl_bracket", "lambert_jonas", "v50", "runs", "non_monotone")
-        emit(json.dumps({k: res[k] for k in keep if k in res}))
+        emit(jsontext.dumps({k: res[k] for k in keep if k in res}))
     else:
         lj = res["lambert_jonas"]
         console.print(f"V_BL = {res['v_bl']:.4g} m/s (bracket {res['v_bl_bracket'][0]:.4g} – "

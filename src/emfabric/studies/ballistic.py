@@ -262,16 +262,15 @@ def _node_spacing(scenario: Scenario) -> np.ndarray:
 
 def write_outputs(res: dict[str, Any], out: Path) -> list[Path]:
     """ballistic.json, ballistic.nc (the shots) and ballistic.png."""
-    import json
-
     import xarray as xr
 
     from emfabric import __version__
+    from emfabric.io import jsontext
     from emfabric.io.atomic import write_atomic
     from emfabric.io.netcdf import write_netcdf
 
     out.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(res, indent=1)
+    text = jsontext.dumps(res, indent=1)
     write_atomic(out / "ballistic.json", lambda tmp: tmp.write_text(text, encoding="utf-8"))
     shots = res["shots"]
     ds = xr.Dataset({
@@ -284,8 +283,8 @@ def write_outputs(res: dict[str, Any], out: Path) -> list[Path]:
                  {"long_name": "modulus seed and impact jitter (-1: the scenario as given)"}),
         "status": ("shot", np.array([str(s["status"]) for s in shots])),
     }, attrs={"title": "emfabric ballistic limit", "emfabric_version": __version__,
-              "v_bl": res["v_bl"], "lambert_jonas": json.dumps(res["lambert_jonas"]),
-              "v50": json.dumps(res.get("v50"))})
+              "v_bl": res["v_bl"], "lambert_jonas": jsontext.dumps(res["lambert_jonas"]),
+              "v50": jsontext.dumps(res.get("v50"))})
     write_netcdf(ds, out / "ballistic.nc")
     from emfabric.viz.study_plots import ballistic_figure
 
