@@ -121,6 +121,9 @@ def test_cli_prints_a_typing_mistake_as_a_warning(tmp_path, command):
                          "radius": 0.05, "length": 0.1, "current": 10.0, "turns": 100,
                          "wire_radius": 1e-300}]},
      r"wire_radius = 1e-300 m: allowed: at least 1e-08 m"),
+    ({"field.sources": [{"kind": "magnet", "shape": "cylinder", "polarization": [0, 0, 1.3],
+                         "dimension": [1e-160, 1e-160], "position": [0, 0, 0.05]}]},
+     r"dimension = \[1e-160, 1e-160\]: allowed: lengths of at least 1e-06 m"),
 ])
 def test_extreme_numbers_are_refused_in_words(overrides, expected):
     """Numbers far outside any physical run (found by fuzzing the scenario keys) are refused

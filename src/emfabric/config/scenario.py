@@ -621,7 +621,7 @@ class _Current(_Section):
 
 MIN_COIL_RADIUS = 1e-6
 """Smallest loop or solenoid radius [m] (its default wire radius, 1 % of it, stays a number
-the field's closed forms can divide by)."""
+the field's closed forms can divide by), and smallest magnet dimension."""
 SOURCE_REACH = 1e4
 """Farthest a source's centre may be from the sheet's centre, per coordinate, and its largest
 size [m]: its field on the sheet is nil beyond, and the closed forms overflow."""
@@ -708,6 +708,9 @@ class MagnetSource(_Section):
                              f'"{self.shape}": {what}, {count} positive lengths [m]')
         _within_reach("position", self.position)
         _within_reach("dimension", self.dimension)
+        if min(self.dimension) < MIN_COIL_RADIUS:
+            raise ValueError(f"dimension = {list(self.dimension)}: allowed: lengths of at least "
+                             f"{MIN_COIL_RADIUS:g} m (magpylib's closed forms stall far below)")
         turn = math.sqrt(sum(c * c for c in self.orientation))
         if turn > MAX_ORIENTATION:
             raise ValueError(f"orientation = {list(self.orientation)}: allowed: a rotation "
