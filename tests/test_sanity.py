@@ -21,6 +21,11 @@ from conftest import make
     ({"projectile.position": [0.5, 0.0, 0.05]}, "it will miss the fabric"),
     ({"projectile.velocity": [0.0, 0.0, 250.0]}, "leads away from the sheet"),
     ({"projectile.velocity": [0.0, 0.0, -2e4]}, "far outside ballistic impacts"),
+    # 1000 times the paper's 0.128 kg/m²: the wave speed falls by √1000 to 242 m/s, in range
+    ({"fabric.areal_density": 128.0}, "areal density is 128 kg/m² a ply"),
+    ({"fabric.areal_density": 1e-300}, "areal density is 1e-300 kg/m² a ply"),
+    # the speed scales as 1/√(areal density): 7714 m/s × √(0.12784/1e-300) on this sheet
+    ({"fabric.areal_density": 1e-300}, "wave speed is 2.758e+153 m/s"),
 ])
 def test_typing_mistakes_are_warned_with_the_fix(overrides, expected, caplog):
     """Each mistake of the issue's new user runs (a warning, not an error) and says why and
@@ -124,6 +129,12 @@ def test_cli_prints_a_typing_mistake_as_a_warning(tmp_path, command):
     ({"field.sources": [{"kind": "magnet", "shape": "cylinder", "polarization": [0, 0, 1.3],
                          "dimension": [1e-160, 1e-160], "position": [0, 0, 0.05]}]},
      r"dimension = \[1e-160, 1e-160\]: allowed: lengths of at least 1e-06 m"),
+    # Newtonian mechanics: an initial speed at or above c is refused (|v| without overflow)
+    ({"projectile.velocity": [0, 0, -1e300]},
+     r"projectile.velocity = \[0, 0, -1e\+300\]: a speed of 1e\+300 m/s; allowed: below the "
+     r"speed of light, 299792458 m/s"),
+    ({"fabric.velocity": [3e8, 0, 0]}, r"fabric.velocity = .*: a speed of 3e\+08 m/s"),
+    ({"fabric.velocity": [2.2e8, 2.2e8, 0]}, r"a speed of 3.111e\+08 m/s"),
 ])
 def test_extreme_numbers_are_refused_in_words(overrides, expected):
     """Numbers far outside any physical run (found by fuzzing the scenario keys) are refused
@@ -145,3 +156,30 @@ def test_an_axis_is_a_direction_whatever_its_length():
         assert (m.body.nose == ref.body.nose).all()
     tiny = build_model(load_scenario("demo-small", {**base, "projectile.axis": [5e-324, 0, 0]}))
     assert tiny.body.nose[0] > 0 and tiny.body.nose[1] == tiny.body.nose[2] == 0.0
+
+
+def test_an_arithmetic_error_in_the_step_ends_the_run_as_diverged(tmp_path):
+    """projectile.mass = 5e-324 passes the scenario's rules (a positive number) but its inertia
+    underflows to 0 and the step kernel divides by it: the run ends "diverged" with the time,
+    Δt and the error, its files readable, not with a bare "division by zero"."""
+    import logging
+
+    import xarray as xr
+
+    from emfabric.integrators import DivergenceError
+    from emfabric.runner.loop import run
+
+    sc = load_scenario("demo-small", {"fabric.nodes": [8, 8], "solver.end_time": 2e-6,
+                                      "projectile.mass": 5e-324, "output.paraview": False})
+    log = logging.getLogger("emfabric")
+    level = log.level
+    try:
+        with pytest.raises(DivergenceError) as err:
+            run(sc, tmp_path / "r")
+    finally:
+        log.setLevel(level)
+    out = err.value.result
+    assert out.status == "diverged"
+    assert "diverged at t = 0 s" in out.end_reason and "ZeroDivisionError" in out.end_reason
+    with xr.open_dataset(tmp_path / "r" / "history.nc") as h:
+        assert h.attrs["status"] == "diverged" and h.sizes["time"] >= 1

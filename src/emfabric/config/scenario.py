@@ -37,6 +37,20 @@ PositiveFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 FiniteVec3 = tuple[FiniteFloat, FiniteFloat, FiniteFloat]
+LIGHT_SPEED = 299_792_458.0
+"""The speed of light [m/s]: the model is Newtonian, and an initial speed must be below it."""
+
+
+def _slower_than_light(v: tuple) -> tuple:
+    speed = math.hypot(*v)  # no overflow for components near the largest double
+    if not speed < LIGHT_SPEED:
+        raise ValueError(f"a speed of {speed:.4g} m/s; allowed: below the speed of light, "
+                         f"{LIGHT_SPEED:.9g} m/s (the model is Newtonian)")
+    return v
+
+
+Velocity = Annotated[FiniteVec3, AfterValidator(_slower_than_light)]
+"""An initial velocity [m/s]: finite, and slower than light."""
 
 
 def _library_material_name(v: str | None) -> str | None:
@@ -169,7 +183,7 @@ class Fabric(_Section):
     """[C]."""
     edges: Literal["clamped", "free"] = "clamped"
     """Boundary nodes: "clamped" (fixed) or "free"."""
-    velocity: FiniteVec3 = (0.0, 0.0, 0.0)
+    velocity: Velocity = (0.0, 0.0, 0.0)
     """Initial velocity of every free node [m/s]."""
     rescale: bool = True
     """Run this grid as the same fabric as `reference_nodes` on this sheet: yarn area scales
@@ -469,7 +483,7 @@ class PlySpec(_Section):
     """[m]."""
     charge_per_node: FiniteFloat | None = None
     """[C]."""
-    velocity: FiniteVec3 | None = None
+    velocity: Velocity | None = None
     """Initial velocity of this ply's free nodes [m/s]."""
     rescale: bool | None = None
     """As fabric.rescale, for this ply."""
@@ -522,7 +536,7 @@ class Projectile(_Section):
     """Centre of mass [m]; default: lowest point `gap` above the sheet centre."""
     gap: NonNegFloat = 1e-4
     """Initial clearance below the projectile when `position` is not given [m]."""
-    velocity: FiniteVec3 = (0.0, 0.0, -250.0)
+    velocity: Velocity = (0.0, 0.0, -250.0)
     """Initial velocity of the centre of mass [m/s]."""
     axis: FiniteVec3 | None = None
     """Nose direction in the world frame at t = 0 (the shape's axis, and the tilt and yaw
@@ -1146,6 +1160,10 @@ class _ArrayLine:
         self.errors: list[tuple[dict, tuple]] = []
 
     def text(self) -> str:
+        own = [_rule(e, self.key) for e, sub in self.errors
+               if not sub and e["type"] in _RULE_ERRORS]
+        if own:  # the array's own rule (a validator of the whole array): its words
+            return f"  {self.path} = {_show(self.value)}: {'; '.join(own)}"
         finite = any(e["type"] == "finite_number" for e, _ in self.errors)
         rule = _needs(self.key, finite=finite)
         details = []

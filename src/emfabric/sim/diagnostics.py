@@ -321,7 +321,8 @@ def limits(model: Model) -> Limits:
     free = nodes.inv_mass > 0
     # longitudinal wave speed of the yarn network, L0·sqrt(k/m), the fastest a disturbance runs
     m = float(nodes.mass[free].min()) if free.any() else float(nodes.mass.min())
-    wave = float((yarns.rest_length * np.sqrt(yarns.stiffness / m)).max())
+    with np.errstate(over="ignore", divide="ignore"):  # absurd scales give inf: no limit
+        wave = float((yarns.rest_length * np.sqrt(yarns.stiffness / m)).max())
     spin = float(np.linalg.norm(model.body_w0)) * model.geometry.bound if model.has_body else 0.0
     fastest = max(wave, float(np.linalg.norm(model.body_v0)), spin,
                   float(np.abs(model.node_v0).max(initial=0.0)) * 3 ** 0.5)

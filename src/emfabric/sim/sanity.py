@@ -32,6 +32,12 @@ SHEET_SIZE = (1e-3, 5.0)
 """Sheet sides [m] we do not warn about."""
 BALLISTIC_SPEED = (1.0, 5000.0)
 """Striking speeds [m/s] we do not warn about."""
+FABRIC_AREAL_DENSITY = (1e-3, 100.0)
+"""Areal densities of one ply [kg/m²] we do not warn about (the paper's sheet 0.128, a KM2
+weave 0.18)."""
+YARN_WAVE_SPEED = (10.0, 1e5)
+"""Longitudinal wave speeds of the yarn network [m/s] we do not warn about (7.7 km/s on the
+paper's sheet; aramid and UHMWPE fibres 8–12 km/s)."""
 
 SNAPSHOT_BYTES_PER_NODE = 6 * 8
 """snapshots.nc per node and snapshot: position and velocity (6 doubles) [B]."""
@@ -45,6 +51,34 @@ snapshot; points, velocity, displacement, ply, index and two line cells per node
 def _unit_hint(value: float, unit: str, small: str, factor: float) -> str:
     """"did you type mm as m? (26.35 mm = 0.02635 m)"."""
     return (f"did you type {small} as {unit}? ({value:g} {small} = {value * factor:g} {unit})")
+
+
+def _fabric_warnings(model, lo, hi, from_scenario: bool) -> list[str]:
+    """The fabric's areal density (per ply) and its yarns' longitudinal wave speed L0·√(k/m)
+    (the lightest free node), outside anything woven: a mass or a stiffness typed in the wrong
+    unit, or far enough out of range that the stable step is nil."""
+    out: list[str] = []
+    nodes, yarns = model.nodes, model.yarns
+    free = nodes.inv_mass > 0
+    area = float(np.prod(hi - lo)) * model.ply_count
+    if not from_scenario or not free.any() or area <= 0.0 or yarns.count == 0:
+        return out
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        density = float(nodes.mass.sum()) / area
+        wave = float((yarns.rest_length * np.sqrt(yarns.stiffness)).max()
+                     / math.sqrt(float(nodes.mass[free].min())))
+    lo_d, hi_d = FABRIC_AREAL_DENSITY
+    if not lo_d <= density <= hi_d:
+        out.append(f"the fabric's areal density is {density:.4g} kg/m² a ply, far outside woven "
+                   f"fabrics ({lo_d:g}–{hi_d:g} kg/m²): check fabric.areal_density (or the "
+                   f"yarns' linear density, thread count and fibre density)")
+    lo_c, hi_c = YARN_WAVE_SPEED
+    if not lo_c <= wave <= hi_c:
+        out.append(f"the yarns' longitudinal wave speed is {wave:.4g} m/s, far outside fibres "
+                   f"({lo_c:g}–{hi_c:g} m/s; aramid and UHMWPE 8–12 km/s): check the "
+                   f"material's modulus and the fabric's mass (fabric.areal_density); the "
+                   f"explicit step shrinks as 1/speed")
+    return out
 
 
 def pre_run_warnings(model) -> list[str]:
@@ -64,6 +98,7 @@ def pre_run_warnings(model) -> list[str]:
                            f"is far outside armour panels ({SHEET_SIZE[0]:g}–{SHEET_SIZE[1]:g} m)"
                            + (f"; {hint}" if hint else ""))
                 break
+    out += _fabric_warnings(model, lo, hi, sc is not None)
     if not model.has_body:
         return out
     pr = sc.projectile if sc is not None else None
