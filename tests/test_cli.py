@@ -64,3 +64,12 @@ def test_non_finite_numbers_become_null():
     text = dumps({"a": float("nan"), "b": [np.float64(np.inf), np.array([1.5, -np.inf])],
                   "c": np.int64(3), "d": (2.0, "x")})
     assert _strict(text) == {"a": None, "b": [None, [1.5, None]], "c": 3, "d": [2.0, "x"]}
+
+
+def test_help_shows_units_in_brackets():
+    """Help text is plain text, not console markup: `[s]` and `[set]` are printed (Rich's
+    markup read them as a strike-through tag and an unknown tag, and dropped them)."""
+    r = _run("field", "--help")
+    assert r.returncode == 0 and "Time [s]" in r.stdout
+    r = _run("sweep", "--help")
+    assert r.returncode == 0 and "[set]" in r.stdout

@@ -22,6 +22,7 @@ EXIT_OK, EXIT_FAILED, EXIT_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 app = typer.Typer(
     add_completion=False,
     no_args_is_help=True,
+    rich_markup_mode=None,
     help="Simulate a rigid projectile striking electromagnetically sensitive fabric.",
     epilog="Exit status: 0 done; 1 a runtime failure (diverged or failed run, write error, "
            "failed study); 2 an input error (bad scenario, option or input file; output "
