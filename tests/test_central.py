@@ -151,24 +151,35 @@ def test_thin_fast_wire_does_not_tunnel(integrator):
     assert res.end_reason != "never touched"
 
 
-@pytest.mark.parametrize("plies", [1, 2])
-def test_contact_counts_nodes_once_and_segments_apart(plies):
+@pytest.mark.parametrize("plies, integrator", [(1, "central-difference"),
+                                               (2, "central-difference"), (1, "phi")])
+def test_contact_counts_nodes_once_and_segments_apart(plies, integrator):
     """A wire lying along x, half a cell off a node row and three cells long with its ends in
     mid-cell, pressed flat onto the sheet (12.7 mm cells): it crosses exactly three of the
     y-yarns' segments and touches no node, so the history counts 3 segments and their 6 end
     nodes, all on the top ply, at every record where it touches (the step that meets them
-    sends the six nodes ahead of the wire)."""
+    sends the six nodes ahead of the wire). The φ-scheme meets the three at once with a
+    contraction no step size improves (the 1 g wire against their struck mass): it must
+    complete with its patient steps (phi.Integrator.step), not stop at dt_min."""
     cell = 0.254 / 20
     sc = make(**{"fabric.nodes": [21, 21], "fabric.plies": plies, "field.B": [0, 0, 0],
                  "fabric.material.modulus_cv": 0.0, "projectile.shape": "cylinder",
                  "projectile.radius": 5e-5, "projectile.length": 3 * cell,
                  "projectile.mass": 1e-3, "projectile.axis": [1.0, 0.0, 0.0],
                  "projectile.position": [0.0, cell / 2, 1.5e-4],
-                 "projectile.velocity": [0.0, 0.0, -300.0], "solver.end_time": 4e-6, **CD})
-    h = run(sc).history
+                 "projectile.velocity": [0.0, 0.0, -300.0], "solver.end_time": 4e-6, **CD,
+                 "solver.integrator": integrator})
+    res = run(sc)
+    assert res.status == "complete"
+    h = res.history
     touching = h.contact_segments.values > 0
     assert touching.any()
-    assert set(h.contact_segments.values[touching]) == {3}
+    if integrator == "phi":
+        # the implicit contact keeps the wire on the yarns after the first impulse (the outer
+        # two may touch a step before the middle one again): 3 at most, 3 at the end
+        assert h.contact_segments.values.max() == 3 and h.contact_segments.values[-1] == 3
+    else:
+        assert set(h.contact_segments.values[touching]) == {3}
     np.testing.assert_array_equal(h.contact_nodes.values, 2 * h.contact_segments.values)
     per_ply = h.contact_nodes_per_ply.values
     np.testing.assert_array_equal(per_ply[:, 0], h.contact_nodes.values)
