@@ -211,3 +211,27 @@ def test_a_pack_resumes_bitwise(tmp_path, integrator):
     _same_files(part, full)
     ds = xr.open_dataset(full / "history.nc")
     assert ds.sizes["ply"] == 2 and float(ds.max_deflection_per_ply[-1, 1]) > 0.0
+
+
+def test_patient_steps_resume_bit_for_bit(tmp_path):
+    """The φ-scheme's patient step (a 1 g wire striking three yarn segments at once: no Δt
+    lets K_d iterations meet the tolerance, phi.Integrator.step) is taken at step 9; a run
+    stopped right after it resumes into a step that starts patient as the uninterrupted run's
+    did (State.iterations, in the checkpoint), and the files are the same bit for bit."""
+    cell = 0.254 / 20
+    over = {"fabric.nodes": [21, 21], "field.B": [0, 0, 0], "fabric.material.modulus_cv": 0.0,
+            "projectile.shape": "cylinder", "projectile.radius": 5e-5,
+            "projectile.length": 3 * cell, "projectile.mass": 1e-3,
+            "projectile.axis": [1.0, 0.0, 0.0], "projectile.position": [0.0, cell / 2, 1.5e-4],
+            "projectile.velocity": [0.0, 0.0, -300.0], "solver.end_time": 4e-6,
+            "solver.integrator": "phi", "output.snapshot_interval": 5e-7}
+    full = tmp_path / "full"
+    run(load_scenario("demo-small", over), full)
+    iterations = xr.open_dataset(full / "history.nc").iterations.values
+    k_d = load_scenario("demo-small", over).solver.target_iterations
+    patient = np.flatnonzero(iterations > k_d)
+    assert patient.size and patient[0] == 9
+    part = interrupted_demo(tmp_path / "part", over, after=9)
+    assert int(xr.open_dataset(part / "history.nc").iterations[-1]) > k_d
+    assert resume(part).status == "complete"
+    _same_files(part, full)

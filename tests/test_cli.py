@@ -62,8 +62,10 @@ def test_non_finite_numbers_become_null():
 
     np = __import__("numpy")
     text = dumps({"a": float("nan"), "b": [np.float64(np.inf), np.array([1.5, -np.inf])],
-                  "c": np.int64(3), "d": (2.0, "x")})
-    assert _strict(text) == {"a": None, "b": [None, [1.5, None]], "c": 3, "d": [2.0, "x"]}
+                  "c": np.int64(3), "d": (2.0, "x"), "e": np.longdouble(0.5),
+                  "f": np.array([np.longdouble("nan")])})
+    assert _strict(text) == {"a": None, "b": [None, [1.5, None]], "c": 3, "d": [2.0, "x"],
+                             "e": 0.5, "f": [None]}
 
 
 def test_help_shows_units_in_brackets():

@@ -302,3 +302,14 @@ def test_predictor_changes_the_start_not_the_solution():
     scale = np.abs(xs).max()
     assert np.abs(xe - xs).max() < 1e-9 * scale
     assert ke < 0.8 * ks, (ke, ks)
+
+
+def test_step_factor_at_the_ends_of_a_doubles_range():
+    """Eq. 3.9 with a tiny exponent p puts ϖ^(1/(pK)) beyond a double's range: the factor is
+    then inf (ϖ < 1: the power underflows to 0) or 0 (ϖ > 1: it overflows), not an exception;
+    at the paper's p = 2 it is the formula's value."""
+    from emfabric.integrators.phi import step_factor
+
+    assert step_factor(0.5, 6, 1e-6, 6, 1e-5) == math.inf
+    assert step_factor(2.0, 6, 1e-6, 6, 1e-5) == 0.0
+    assert step_factor(1e-4, 6, 1e-6, 6, 2.0) == (1e-6 ** (1 / 12)) / (1e-4 ** (1 / 12))

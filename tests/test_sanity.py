@@ -22,8 +22,11 @@ from conftest import make
     ({"projectile.velocity": [0.0, 0.0, 250.0]}, "leads away from the sheet"),
     ({"projectile.velocity": [0.0, 0.0, -2e4]}, "far outside ballistic impacts"),
     # 1000 times the paper's 0.128 kg/m²: the wave speed falls by √1000 to 242 m/s, in range
-    ({"fabric.areal_density": 128.0}, "areal density is 128 kg/m² a ply"),
-    ({"fabric.areal_density": 1e-300}, "areal density is 1e-300 kg/m² a ply"),
+    ({"fabric.areal_density": 128.0}, "the fabric's areal density is 128 kg/m²"),
+    ({"fabric.areal_density": 1e-300}, "areal density is 1e-300 kg/m²"),
+    # one mistyped ply of four (kg/m² × 1000) is not averaged away with the other three
+    ({"fabric.plies": 4, "fabric.ply": [{}, {"areal_density": 128.0}, {}, {}]},
+     "ply 2's areal density is 128 kg/m²"),
     # the speed scales as 1/√(areal density): 7714 m/s × √(0.12784/1e-300) on this sheet
     ({"fabric.areal_density": 1e-300}, "wave speed is 2.758e+153 m/s"),
 ])

@@ -46,7 +46,8 @@ def _check_format(path: Path) -> None:
         raise typer.Exit(EXIT_INPUT)
 
 
-@app.command(context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
+@app.command(short_help="The applied E and B at points (--at X Y Z), or a plot.",
+             context_settings={"ignore_unknown_options": True, "allow_extra_args": True})
 def field(
     ctx: typer.Context,
     scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name")],

@@ -46,7 +46,7 @@ def _by_source(sources: dict[str, str]) -> str:
     return "; ".join(f"{', '.join(fields)}: {key}" for key, fields in groups.items())
 
 
-@app.command()
+@app.command(short_help="List the material and fabric-style library.")
 def materials(
     as_json: Annotated[bool, typer.Option(
         "--json", help="Print the library as JSON (SI units named in the keys)")] = False,

@@ -22,7 +22,7 @@ from emfabric.cli.app import (
 )
 
 
-@app.command()
+@app.command(short_help="Draw a run's or a study's figures (PNG and PDF).")
 def plot(
     runs: Annotated[list[Path], typer.Argument(help="Run folder(s); several are overlaid")],
     out: Annotated[Path | None, typer.Option(
@@ -48,7 +48,7 @@ def plot(
         emit(str(f))
 
 
-@app.command()
+@app.command(short_help="Write an MP4 (and GIF) of a run's impact.")
 def animate(
     run_dir: Annotated[Path, typer.Argument(help="Run folder")],
     gif: Annotated[bool, typer.Option("--gif", help="Also write a GIF")] = False,

@@ -38,7 +38,7 @@ from emfabric.io import jsontext
 _load = load_or_exit
 
 
-@app.command()
+@app.command(short_help="Run a scenario into a folder (--resume continues one).")
 def run(
     scenario: Annotated[str | None, typer.Argument(
         help="TOML file or built-in scenario name (see `emfabric scenarios`); default "
@@ -197,7 +197,7 @@ def _print_summary(result, as_json: bool) -> None:
     console.print(table)
 
 
-@app.command()
+@app.command(short_help="Check a scenario; --show prints it in full.")
 def validate(
     scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name")],
     set_: Annotated[list[str] | None, typer.Option("--set", help="Override a value")] = None,
@@ -262,7 +262,7 @@ def _print_plausibility(model) -> None:
         warn(w)
 
 
-@app.command()
+@app.command(short_help="Print a scenario file to start from, keys explained.")
 def new(
     scenario: Annotated[str, typer.Argument(
         help="Built-in scenario (see `emfabric scenarios`) or TOML file to start from")
@@ -274,7 +274,7 @@ def new(
     emit(_load(scenario, set_).to_commented_toml())
 
 
-@app.command()
+@app.command(short_help="List the built-in scenarios.")
 def scenarios() -> None:
     """List the built-in scenarios."""
     table = Table("name", "description")

@@ -98,7 +98,7 @@ def _progress(quiet: bool) -> Progress:
                    console=console, disable=quiet)
 
 
-@app.command()
+@app.command(short_help="Run every case of a study on Dask: results.nc.")
 def sweep(
     study: Annotated[Path, typer.Argument(help="Study file (TOML: base, [set], [axes] or "
                                                "[lhs])")],
@@ -172,7 +172,7 @@ SetOpt = Annotated[list[str] | None, typer.Option(
     "--set", help="Override a scenario value, e.g. --set fabric.nodes=[40,40] (repeatable)")]
 
 
-@app.command()
+@app.command(short_help="The paper's estimate of the field for a target tilt.")
 def estimate(
     scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name")],
     target_tilt: Annotated[float, typer.Option("--target-tilt", parser=number(float),
@@ -194,7 +194,8 @@ def estimate(
     emit(jsontext.dumps(est.as_dict()))
 
 
-@app.command("design-field")
+@app.command("design-field",
+             short_help="Find the smallest field scale reaching a target tilt.")
 def design_field(
     scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name")],
     target_tilt: Annotated[float, typer.Option("--target-tilt", parser=number(float),
@@ -255,7 +256,8 @@ def design_field(
                       f"{res['estimate_eq54']:.3g} T; {res['runs']} runs; figure {fig}")
 
 
-@app.command("ballistic-limit")
+@app.command("ballistic-limit",
+             short_help="The ballistic limit V_BL (V50 with --seeds) and residual speeds.")
 def ballistic_limit(
     scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name (yarns "
                                                  "must break: e.g. `rupture`)")],

@@ -827,11 +827,13 @@ class SolverSpec(_Section):
     adaptive: bool = True
     """False: fixed Δt = dt_max, iterate to `tolerance` within `max_iterations`."""
     max_iterations: Annotated[int, Field(ge=1, le=100000)] = 200
-    """Iteration limit per step when adaptive = false [-]."""
+    """Iteration limit per step when adaptive = false; with adaptive = true, the limit of a
+    "patient" step, tried before Δt would fall below dt_min (docs/theory.md §4) [-]."""
     dt_max: PositiveFloat = 1e-6
     """Largest time step [s]."""
     dt_min: PositiveFloat = 1e-13
-    """Smallest time step; below it the run stops as diverged [s]."""
+    """Smallest time step; below it the run stops as diverged (the φ-scheme first tries a
+    patient step of max_iterations at the step's first Δt) [s]."""
     dt_initial: PositiveFloat | None = None
     """First Δt tried; default dt_max (the paper)."""
     end_time: PositiveFloat = 1.5e-3

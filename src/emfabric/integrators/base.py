@@ -269,6 +269,14 @@ class IntegratorBase(ABC):
             if self._background_ok:
                 mark_compiled(self.variant(True))
 
+    def arithmetic_failure(self, s_in: State, dt: float, exc: ArithmeticError) -> None:
+        """Raise the DivergenceError of a step kernel stopped by a division by zero or an
+        overflow (Numba raises them as Python does)."""
+        self.fail(s_in, dt, f"the step kernel stopped on {exc!r}: a quantity of the scenario is "
+                  "too small or too large to compute with (a mass, size, stiffness, charge or "
+                  "field at the end of a double's range; the warnings name the keys outside "
+                  "physical ranges)")
+
     def fail(self, s_in: State, dt: float, why: str) -> None:
         """Raise the DivergenceError of a step from s_in at Δt: when, why, and the node with the
         largest force."""

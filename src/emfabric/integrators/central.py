@@ -136,10 +136,13 @@ class CentralDifference(IntegratorBase):
         rejected = 0
         s_out.energy[:] = s_in.energy
         while True:
-            status, nc, crit, travel = self._step(self.threaded, self.physics, s_in.arrays,
-                                          s_out.arrays, self.work, *self.kernel_buffers,
-                                          *self.switches, s_in.t, dt, ROTATION_TOLERANCE,
-                                          s_out.energy)
+            try:
+                status, nc, crit, travel = self._step(
+                    self.threaded, self.physics, s_in.arrays, s_out.arrays, self.work,
+                    *self.kernel_buffers, *self.switches, s_in.t, dt, ROTATION_TOLERANCE,
+                    s_out.energy)
+            except ArithmeticError as exc:  # a division by zero or overflow in the kernel
+                self.arithmetic_failure(s_in, dt, exc)
             if status == OK:
                 break
             if status == NOT_FINITE:

@@ -6,6 +6,7 @@ and on failure shrinks Δt by the controller (3.9) and restarts from t (s_in is 
 
 from __future__ import annotations
 
+import logging
 import math
 import time
 
@@ -28,12 +29,22 @@ from emfabric.sim.fastcall import Direct
 from emfabric.sim.model import Model
 from emfabric.sim.state import State
 
+log = logging.getLogger(__name__)
+
 
 def step_factor(error: float, k: int, tol: float, k_target: int, p: float) -> float:
-    """Φ_K of eq. 3.9 with ϖ_0 = 1: (TOL)^(1/(p K_d)) / (ϖ_K)^(1/(p K))."""
+    """Φ_K of eq. 3.9 with ϖ_0 = 1: (TOL)^(1/(p K_d)) / (ϖ_K)^(1/(p K)). A tiny exponent p can
+    put a power beyond a double's range: the factor is then inf (the denominator underflows to
+    0) or 0 (it overflows)."""
     if error <= 0.0:
         return math.inf
-    return tol ** (1.0 / (p * k_target)) / error ** (1.0 / (p * k))
+    try:
+        below = error ** (1.0 / (p * k))
+    except OverflowError:
+        return 0.0
+    if below == 0.0:
+        return math.inf
+    return tol ** (1.0 / (p * k_target)) / below
 
 
 THREADS_FROM_NODES = 250 * 250
@@ -75,6 +86,7 @@ class Integrator(IntegratorBase):
         # (step's docstring)
         self.patient_solver = self.solver._replace(
             iteration_limit=max(int(k_target), int(solver.max_iterations)))
+        self._told_patient = False
         self.p = solver.exponent
         self.safety = solver.safety
         self.adaptive = solver.adaptive
@@ -110,8 +122,9 @@ class Integrator(IntegratorBase):
         Δt to dt_min does not help. Before it would fail, the step is tried again from its
         first Δt with up to solver.max_iterations iterations ("patient"); the next step starts
         patient too while the previous one needed more than K_d iterations (State.iterations,
-        so a resumed run does the same), and a patient step keeps its Δt. A run whose steps
-        converge within K_d iterations, as the paper's do, is unchanged to the bit."""
+        so a resumed run does the same), its Δt from eq. 3.9 with max_iterations in place of
+        K_d. A run whose steps converge within K_d iterations, as the paper's do, is unchanged
+        to the bit."""
         self._before_step()
         clock = time.perf_counter()
         # no tunnelling: the body moves at most contact.CONTACT_TRAVEL of its radius relative
@@ -127,7 +140,10 @@ class Integrator(IntegratorBase):
         while True:
             args = self._args(s_in, s_out, dt, *self.kernel_buffers,
                               self.patient_solver if patient else self.solver)
-            status, k, err, nc = self._attempt(self.threaded, *args)
+            try:
+                status, k, err, nc = self._attempt(self.threaded, *args)
+            except ArithmeticError as exc:  # a division by zero or overflow in the kernel
+                self.arithmetic_failure(s_in, dt, exc)
             evaluations += k
             if status == CONVERGED:
                 break
@@ -146,6 +162,13 @@ class Integrator(IntegratorBase):
             if dt < self.dt_min and status == NOT_CONVERGED and can_wait and not patient:
                 patient = True
                 dt = first_dt
+                if not self._told_patient:
+                    self._told_patient = True
+                    log.info("t = %.6g s: no Δt lets the φ-iteration meet its tolerance in "
+                             "K_d = %d iterations (a collision of a light body: contact's "
+                             "contraction does not improve with Δt); patient steps of up to "
+                             "%d iterations from here while needed", s_in.t, k_d,
+                             self.patient_solver.iteration_limit)
                 continue
             if dt < self.dt_min:
                 what = {NOT_FINITE: "non-finite values",
@@ -158,8 +181,11 @@ class Integrator(IntegratorBase):
         # accept: time advances by the step just taken
         s_out.t = s_in.t + dt
         if self.adaptive and k > k_d:
-            # a patient step: eq. 3.9 would only shrink a step that no smaller Δt helps
-            s_out.dt = min(self.dt_max, dt)
+            # a patient step: eq. 3.9 against max_iterations (against K_d it would only shrink
+            # a step that no smaller Δt helps)
+            grow = self.safety * step_factor(err, k, tol, self.patient_solver.iteration_limit,
+                                             self.p)
+            s_out.dt = min(self.dt_max, dt * grow)
         elif self.adaptive:
             grow = self.safety * step_factor(err, k, tol, k_d, self.p)
             s_out.dt = min(self.dt_max, dt * grow)

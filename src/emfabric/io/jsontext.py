@@ -20,8 +20,12 @@ def finite_or_null(obj: Any) -> Any:
     if isinstance(obj, (list, tuple)):
         return [finite_or_null(v) for v in obj]
     if type(obj).__module__ == "numpy" and hasattr(obj, "tolist"):
-        # a NumPy array or scalar (NumPy is not imported for this: the CLI starts without it)
-        return finite_or_null(obj.tolist())
+        # a NumPy array or scalar (NumPy is not imported for this: the CLI starts without it);
+        # a long double's tolist() is a long double again: a float then
+        value = obj.tolist()
+        if type(value).__module__ == "numpy":
+            value = float(value)
+        return finite_or_null(value)
     if isinstance(obj, float) and not math.isfinite(obj):
         return None
     return obj

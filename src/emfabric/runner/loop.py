@@ -244,13 +244,7 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
         while s_in.t < t_end * (1 - 1e-12):
             if _STOP.is_set():
                 raise KeyboardInterrupt
-            try:
-                info = integ.step(s_in, s_out, dt_limit=t_end - s_in.t)
-            except ArithmeticError as exc:  # a kernel's division by zero or overflow
-                integ.fail(s_in, s_in.dt, f"the step stopped on {exc!r}: a quantity of the "
-                           "scenario is too small or too large to compute with (a mass, size, "
-                           "stiffness, charge or field at the end of a double's range; the "
-                           "warnings name the keys outside physical ranges)")
+            info = integ.step(s_in, s_out, dt_limit=t_end - s_in.t)
             s_in, s_out = s_out, s_in
             row = recorder.new_row()
             fab = measure(model, s_in, row, integ.fabric_of(s_in), integ.contacts_of(s_in))

@@ -53,31 +53,44 @@ def _unit_hint(value: float, unit: str, small: str, factor: float) -> str:
     return (f"did you type {small} as {unit}? ({value:g} {small} = {value * factor:g} {unit})")
 
 
-def _fabric_warnings(model, lo, hi, from_scenario: bool) -> list[str]:
-    """The fabric's areal density (per ply) and its yarns' longitudinal wave speed L0·√(k/m)
-    (the lightest free node), outside anything woven: a mass or a stiffness typed in the wrong
-    unit, or far enough out of range that the stable step is nil."""
+def _fabric_warnings(model, from_scenario: bool) -> list[str]:
+    """Each ply's areal density and its yarns' longitudinal wave speed L0·√(k/m) (its lightest
+    free node), outside anything woven: a mass or a stiffness typed in the wrong unit, or far
+    enough out of range that the stable step is nil. Per ply, so one mistyped ply of a pack is
+    not averaged away."""
     out: list[str] = []
     nodes, yarns = model.nodes, model.yarns
-    free = nodes.inv_mass > 0
-    area = float(np.prod(hi - lo)) * model.ply_count
-    if not from_scenario or not free.any() or area <= 0.0 or yarns.count == 0:
+    if not from_scenario:
         return out
-    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
-        density = float(nodes.mass.sum()) / area
-        wave = float((yarns.rest_length * np.sqrt(yarns.stiffness)).max()
-                     / math.sqrt(float(nodes.mass[free].min())))
+    plies = model.ply_count
     lo_d, hi_d = FABRIC_AREAL_DENSITY
-    if not lo_d <= density <= hi_d:
-        out.append(f"the fabric's areal density is {density:.4g} kg/m² a ply, far outside woven "
-                   f"fabrics ({lo_d:g}–{hi_d:g} kg/m²): check fabric.areal_density (or the "
-                   f"yarns' linear density, thread count and fibre density)")
     lo_c, hi_c = YARN_WAVE_SPEED
-    if not lo_c <= wave <= hi_c:
-        out.append(f"the yarns' longitudinal wave speed is {wave:.4g} m/s, far outside fibres "
-                   f"({lo_c:g}–{hi_c:g} m/s; aramid and UHMWPE 8–12 km/s): check the "
-                   f"material's modulus and the fabric's mass (fabric.areal_density); the "
-                   f"explicit step shrinks as 1/speed")
+    for p in range(plies):
+        a, b = int(nodes.ply_nodes[p]), int(nodes.ply_nodes[p + 1])
+        s0, s1 = int(yarns.ply_segments[p]), int(yarns.ply_segments[p + 1])
+        mass = nodes.mass[a:b]
+        live = mass > 0
+        free = nodes.inv_mass[a:b] > 0
+        if not live.any() or not free.any() or s1 <= s0:
+            continue
+        x0 = nodes.x0[:2, a:b][:, live]
+        area = float(np.prod(x0.max(axis=1) - x0.min(axis=1)))
+        which = f"ply {p + 1}'s" if plies > 1 else "the fabric's"
+        key = f"fabric.ply[{p}].areal_density or fabric.areal_density" if plies > 1 else \
+            "fabric.areal_density"
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+            density = float(mass.sum()) / area if area > 0.0 else math.inf
+            wave = float((yarns.rest_length[s0:s1] * np.sqrt(yarns.stiffness[s0:s1])).max()
+                         / math.sqrt(float(mass[free].min())))
+        if area > 0.0 and not lo_d <= density <= hi_d:
+            out.append(f"{which} areal density is {density:.4g} kg/m², far outside woven "
+                       f"fabrics ({lo_d:g}–{hi_d:g} kg/m² a ply): check {key} (or the yarns' "
+                       f"linear density, thread count and fibre density)")
+        if not lo_c <= wave <= hi_c:
+            out.append(f"{which} yarns' longitudinal wave speed is {wave:.4g} m/s, far outside "
+                       f"fibres ({lo_c:g}–{hi_c:g} m/s; aramid and UHMWPE 8–12 km/s): check "
+                       f"the material's modulus and the fabric's mass ({key}); the explicit "
+                       f"step shrinks as 1/speed")
     return out
 
 
@@ -98,7 +111,7 @@ def pre_run_warnings(model) -> list[str]:
                            f"is far outside armour panels ({SHEET_SIZE[0]:g}–{SHEET_SIZE[1]:g} m)"
                            + (f"; {hint}" if hint else ""))
                 break
-    out += _fabric_warnings(model, lo, hi, sc is not None)
+    out += _fabric_warnings(model, sc is not None)
     if not model.has_body:
         return out
     pr = sc.projectile if sc is not None else None
