@@ -186,3 +186,25 @@ def test_an_arithmetic_error_in_the_step_ends_the_run_as_diverged(tmp_path):
     assert "diverged at t = 0 s" in out.end_reason and "ZeroDivisionError" in out.end_reason
     with xr.open_dataset(tmp_path / "r" / "history.nc") as h:
         assert h.attrs["status"] == "diverged" and h.sizes["time"] >= 1
+
+
+def test_a_nil_stable_step_says_which_limit(tmp_path):
+    """fabric.areal_density = 1e-300 makes the nodes so light that 2/ω_max underflows: the run
+    ends diverged at t = 0 naming the stability limit and the keys that set it (it said only
+    "courant × the stability limit, or the no-tunnelling limit")."""
+    import logging
+
+    from emfabric.integrators import DivergenceError
+    from emfabric.runner.loop import run
+
+    sc = load_scenario("demo-small", {"fabric.nodes": [8, 8], "solver.end_time": 2e-6,
+                                      "fabric.areal_density": 1e-300, "output.paraview": False})
+    log = logging.getLogger("emfabric")
+    level = log.level
+    try:
+        with pytest.raises(DivergenceError, match=r"the stability limit 2/ω_max = .* check the "
+                                                  r"material's modulus and the fabric's areal "
+                                                  r"density"):
+            run(sc, tmp_path / "r")
+    finally:
+        log.setLevel(level)

@@ -120,6 +120,18 @@ class CentralDifference(IntegratorBase):
             travel = self._travel(None, self.physics, state.node_x, state.node_v, state.body)
         return min(self.courant * crit, travel, self.dt_max)
 
+    def _which_limit(self, state: State) -> str:
+        """Which limit sets the step at this state, in words (for a step below dt_min)."""
+        crit = self._stable(None, self.physics, state.node_x, state.seg_alpha, self.scratch)
+        travel = self._travel(None, self.physics, state.node_x, state.node_v, state.body)
+        if self.courant * crit <= travel:
+            return (f"the stability limit 2/ω_max = {crit:.3g} s × courant {self.courant:g} "
+                    "(the stiffest yarn over the lightest node: check the material's modulus "
+                    "and the fabric's areal density)")
+        return (f"the no-tunnelling limit {travel:.3g} s (the body may move a quarter of its "
+                "radius relative to the fastest node a step: check the speeds and the "
+                "projectile's size)")
+
     def step(self, s_in: State, s_out: State, *, dt_limit: float = math.inf) -> StepInfo:
         """Advance s_in by one step into s_out; s_in is left untouched. The step is the one the
         previous step computed for this state (State.dt; also in a checkpoint), or computed here
@@ -129,9 +141,8 @@ class CentralDifference(IntegratorBase):
         clock = time.perf_counter()
         step = s_in.dt if s_in.steps > 0 else self.stable_dt(s_in)
         if step < self.dt_min:
-            self.fail(s_in, step, f"the explicit step {step:.3g} s (courant {self.courant:g} × "
-                      "the stability limit, or the no-tunnelling limit) is below solver.dt_min "
-                      f"= {self.dt_min:g} s")
+            self.fail(s_in, step, f"the explicit step {step:.3g} s is below solver.dt_min = "
+                      f"{self.dt_min:g} s: {self._which_limit(s_in)}")
         dt = min(step, dt_limit)
         rejected = 0
         s_out.energy[:] = s_in.energy
