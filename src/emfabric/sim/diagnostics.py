@@ -316,13 +316,19 @@ class Limits(NamedTuple):
     """[m]"""
 
 
+def wave_speed(rest_length: np.ndarray, stiffness: np.ndarray, lightest: float) -> float:
+    """The fastest longitudinal wave of yarn segments, max L0·√(k/m) with m the lightest free
+    node [m/s]; √k/√m, so that absurd scales give a large number rather than an overflow."""
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        return float((rest_length * np.sqrt(stiffness)).max() / math.sqrt(lightest))
+
+
 def limits(model: Model) -> Limits:
     nodes, yarns = model.nodes, model.yarns
     free = nodes.inv_mass > 0
     # longitudinal wave speed of the yarn network, L0·sqrt(k/m), the fastest a disturbance runs
     m = float(nodes.mass[free].min()) if free.any() else float(nodes.mass.min())
-    with np.errstate(over="ignore", divide="ignore"):  # absurd scales give inf: no limit
-        wave = float((yarns.rest_length * np.sqrt(yarns.stiffness / m)).max())
+    wave = wave_speed(yarns.rest_length, yarns.stiffness, m)
     spin = float(np.linalg.norm(model.body_w0)) * model.geometry.bound if model.has_body else 0.0
     fastest = max(wave, float(np.linalg.norm(model.body_v0)), spin,
                   float(np.abs(model.node_v0).max(initial=0.0)) * 3 ** 0.5)

@@ -58,6 +58,8 @@ def _fabric_warnings(model, from_scenario: bool) -> list[str]:
     free node), outside anything woven: a mass or a stiffness typed in the wrong unit, or far
     enough out of range that the stable step is nil. Per ply, so one mistyped ply of a pack is
     not averaged away."""
+    from emfabric.sim.diagnostics import wave_speed
+
     out: list[str] = []
     nodes, yarns = model.nodes, model.yarns
     if not from_scenario:
@@ -80,8 +82,8 @@ def _fabric_warnings(model, from_scenario: bool) -> list[str]:
             "fabric.areal_density"
         with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
             density = float(mass.sum()) / area if area > 0.0 else math.inf
-            wave = float((yarns.rest_length[s0:s1] * np.sqrt(yarns.stiffness[s0:s1])).max()
-                         / math.sqrt(float(mass[free].min())))
+        wave = wave_speed(yarns.rest_length[s0:s1], yarns.stiffness[s0:s1],
+                          float(mass[free].min()))
         if area > 0.0 and not lo_d <= density <= hi_d:
             out.append(f"{which} areal density is {density:.4g} kg/m², far outside woven "
                        f"fabrics ({lo_d:g}–{hi_d:g} kg/m² a ply): check {key} (or the yarns' "
