@@ -10,6 +10,8 @@
 ``--packs`` instead runs (j): packs of 1, 4 and 16 plies of 100×100, time per simulated µs
 with and without ply contact, memory per node.
 ``--schemes`` instead weighs solver settings on paper-field against (e)'s converged run.
+``--ladder SCENARIO`` instead runs (l): central differences at courant / 2^k, each run against
+the next finer and the finest.
 """
 
 from __future__ import annotations
@@ -778,8 +780,10 @@ SIDE_BY_SIDE = {"paper-field": ((0,), 0.02, 0.03), "paper-spin": ((1, 2), 0.02, 
 contact phase as a fraction of the peak; |Δω| / |ω| when contact ends; None: no target)."""
 LOADED_END = {100: 100e-6, 200: 30e-6, 400: 10e-6, 1000: 3e-6}
 """(i)'s simulated time per grid [s] (from the start: the sphere reaches the sheet at once)."""
-FINE = 4
-"""(h)'s converged run: central differences at courant / FINE, checked at courant / (2 FINE)."""
+FINE = {"ogive-field": 16}
+"""(h)'s converged run: central differences at courant / FINE (4 where not named), checked at
+courant / (2 FINE). ogive-field needs 16: down to courant / 4 its segment contacts stick where
+the converged run's slide (docs/theory.md §5.2; `--ladder ogive-field`)."""
 
 
 def bench_side_by_side(names: list[str], cache: Path | None) -> list[dict]:
@@ -791,10 +795,12 @@ def bench_side_by_side(names: list[str], cache: Path | None) -> list[dict]:
     for name in names:
         comps = SIDE_BY_SIDE.get(name, ((0, 1, 2), None, None))[0]
         courant = load_scenario(name, {"solver.integrator": "central-difference"}).solver.courant
-        fine = {"solver.integrator": "central-difference", "solver.courant": courant / FINE}
+        k = FINE.get(name, 4)
+        fine = {"solver.integrator": "central-difference", "solver.courant": courant / k}
         ref, ref_summary = _history_run(name, fine, cache)
-        chk, _ = _history_run(name, {**fine, "solver.courant": courant / (2 * FINE)}, cache)
-        row = {"name": name, "comps": comps, "courant": courant, "ref_summary": ref_summary,
+        chk, _ = _history_run(name, {**fine, "solver.courant": courant / (2 * k)}, cache)
+        row = {"name": name, "comps": comps, "courant": courant, "fine": k,
+               "ref_summary": ref_summary,
                "check": spin_error(ref, chk, comps), "schemes": {}}
         for scheme in ("phi", "central-difference"):
             gc.collect()
@@ -807,8 +813,8 @@ def bench_side_by_side(names: list[str], cache: Path | None) -> list[dict]:
 
 
 def print_side_by_side(rows: list[dict]) -> None:
-    say(f"(h) both schemes, warm, one thread, against central differences at courant / {FINE} "
-        f"(checked at courant / {2 * FINE}); ω error over the contact phase as a fraction of "
+    say("(h) both schemes, warm, one thread, against central differences at courant / FINE "
+        "(checked at courant / 2 FINE); ω error over the contact phase as a fraction of "
         "the peak of the components named, and |Δω|/|ω| when contact ends")
     say(f"    {'scenario':<12} {'ω':<9} {'scheme':<20} {'wall s':>7} {'steps':>7} {'evals':>7} "
         f"{'ω(t) error':>11} {'exit error':>11}   target")
@@ -833,10 +839,71 @@ def print_side_by_side(rows: list[dict]) -> None:
         c = r["check"]
         ratio = evals["phi"] / max(evals["central-difference"], 1)
         walls = {k: x["summary"]["wall_time_s"] for k, x in r["schemes"].items()}
-        say(f"    {'':<12} {'':<9} converged run vs its half-step check: "
+        say(f"    {'':<12} {'':<9} converged run (courant / {r['fine']}) vs its half-step "
+            "check: "
             f"{100 * c['track']:.2f}% / {100 * c['exit']:.2f}%; φ ÷ central differences: "
             f"{ratio:.1f}× the evaluations, {walls['phi'] / walls['central-difference']:.1f}× "
             "the wall time")
+
+
+# --- (l) a convergence ladder -----------------------------------------------------------------
+
+LADDER_TIMES = (50e-6, 100e-6, 200e-6, 300e-6, 400e-6, 600e-6)
+"""(l): the times at which the ladder prints ω [s]."""
+
+
+def bench_ladder(name: str, levels: int, cache: Path | None) -> dict:
+    """`name` by central differences at its courant / 2**k, k = 0 … levels − 1: each run's ω
+    against the next finer run's and against the finest (spin_error's measures over the
+    finest run's contact phase; the components of SIDE_BY_SIDE, else all three). Shows
+    whether (h)'s converged run is converged and at what order: a first-order error halves
+    from one rung to the next."""
+    from emfabric import load_scenario
+
+    comps = SIDE_BY_SIDE.get(name, ((0, 1, 2), None, None))[0]
+    courant = load_scenario(name, {"solver.integrator": "central-difference"}).solver.courant
+    rungs = []
+    for k in range(levels):
+        c = courant / 2 ** k
+        gc.collect()
+        start = cpu_snapshot()
+        hist, summary = _history_run(name, {"solver.integrator": "central-difference",
+                                            "solver.courant": c}, cache)
+        rungs.append({"courant": c, "history": hist, "summary": summary,
+                      "busy": other_cpu(start)})
+    finest = rungs[-1]["history"]
+    for i, r in enumerate(rungs):
+        r["next"] = (spin_error(r["history"], rungs[i + 1]["history"], comps)
+                     if i + 1 < len(rungs) else None)
+        r["finest"] = spin_error(r["history"], finest, comps) if i + 1 < len(rungs) else None
+    return {"name": name, "comps": comps, "rungs": rungs}
+
+
+def print_ladder(out: dict) -> None:
+    names = "xyz"
+    comps = ",".join("ω_" + names[k] for k in out["comps"])
+    rungs = out["rungs"]
+    say(f"(l) convergence ladder of {out['name']}: central differences at courant / 2^k "
+        "(residual speed and energy absorbed at the run's end); "
+        f"{comps} error over the finest run's contact phase as a fraction of the peak, and "
+        "|Δω|/|ω| when contact ends, against the next rung and against the finest")
+    say(f"    {'courant':>9} {'steps':>8} {'wall s':>8} {'speed m/s':>10} {'absorbed J':>11} "
+        f"{'vs next':>17} {'vs finest':>17}   "
+        + " ".join(f"ω_{names[out['comps'][0]]}({t * 1e6:.0f} µs)".rjust(14)
+                   for t in LADDER_TIMES))
+    for r in rungs:
+        h, s = r["history"], r["summary"]
+        cols = []
+        for key in ("next", "finest"):
+            e = r[key]
+            cols.append("" if e is None else
+                        f"{100 * e['track']:6.2f}% / {100 * e['exit']:6.2f}%")
+        w = [np.interp(t, h["time"], h["omega"][:, out["comps"][0]]) if t <= h["time"][-1]
+             else math.nan for t in LADDER_TIMES]
+        say(f"    {r['courant']:9.5g} {s['steps']:8d} {s['wall_time_s']:8.1f} "
+            f"{s['residual_speed_m_s']:10.1f} {s['energy_absorbed_J']:11.1f} {cols[0]:>17} "
+            f"{cols[1]:>17}   " + " ".join(f"{x:14.1f}" for x in w)
+            + ("" if r["busy"] < 0.1 else f"  ! machine busy ({r['busy']:.2f} other cores)"))
 
 
 # --- (i) a loaded machine ------------------------------------------------------------------
@@ -1268,6 +1335,12 @@ def main(argv: list[str] | None = None) -> None:
                    default=list(SIDE_BY_SIDE),
                    help="(h): these scenarios by both schemes (none: skip)")
     p.add_argument("--side-by-side-only", action="store_true", help="only (h)")
+    p.add_argument("--ladder", metavar="SCENARIO",
+                   help="only (l): SCENARIO by central differences at its courant / 2^k, "
+                        "each run against the next and the finest (long: the finest of 5 "
+                        "levels takes 16× the default run)")
+    p.add_argument("--ladder-levels", type=int, default=5, metavar="K",
+                   help="(l): rungs of the ladder (default 5: courant to courant / 16)")
     p.add_argument("--loaded", type=int, nargs="*", default=[100, 400], metavar="N",
                    help="(i): these grids with default threads and one, idle and loaded "
                         "(none: skip)")
@@ -1318,6 +1391,10 @@ def main(argv: list[str] | None = None) -> None:
         say(f"Other processes used {other_cpu(cpu0):.2f} cores on average while this ran")
         return
     loaded_cases = [(n, LOADED_END.get(n, 5e-6)) for n in a.loaded]
+    if a.ladder:
+        print_ladder(bench_ladder(a.ladder, a.ladder_levels, a.reference_cache))
+        say(f"Other processes used {other_cpu(cpu0):.2f} cores on average while this ran")
+        return
     if a.side_by_side_only:
         print_side_by_side(bench_side_by_side(a.side_by_side, a.reference_cache))
         say(f"Other processes used {other_cpu(cpu0):.2f} cores on average while this ran")
