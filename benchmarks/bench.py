@@ -854,8 +854,9 @@ LADDER_TIMES = (50e-6, 100e-6, 200e-6, 300e-6, 400e-6, 600e-6)
 
 def bench_ladder(name: str, levels: int, cache: Path | None) -> dict:
     """`name` by central differences at its courant / 2**k, k = 0 … levels − 1: each run's ω
-    against the next finer run's and against the finest (spin_error's measures over the
-    finest run's contact phase; the components of SIDE_BY_SIDE, else all three). Shows
+    against the next finer run's and against the finest (spin_error's measures, over the
+    contact phase of the run compared with; the components of SIDE_BY_SIDE, else all
+    three). Shows
     whether (h)'s converged run is converged and at what order: a first-order error halves
     from one rung to the next."""
     from emfabric import load_scenario
@@ -885,7 +886,7 @@ def print_ladder(out: dict) -> None:
     rungs = out["rungs"]
     say(f"(l) convergence ladder of {out['name']}: central differences at courant / 2^k "
         "(residual speed and energy absorbed at the run's end); "
-        f"{comps} error over the finest run's contact phase as a fraction of the peak, and "
+        f"{comps} error over the contact phase as a fraction of the peak, and "
         "|Δω|/|ω| when contact ends, against the next rung and against the finest")
     say(f"    {'courant':>9} {'steps':>8} {'wall s':>8} {'speed m/s':>10} {'absorbed J':>11} "
         f"{'vs next':>17} {'vs finest':>17}   "
@@ -901,7 +902,8 @@ def print_ladder(out: dict) -> None:
         w = [np.interp(t, h["time"], h["omega"][:, out["comps"][0]]) if t <= h["time"][-1]
              else math.nan for t in LADDER_TIMES]
         say(f"    {r['courant']:9.5g} {s['steps']:8d} {s['wall_time_s']:8.1f} "
-            f"{s['residual_speed_m_s']:10.1f} {s['energy_absorbed_J']:11.1f} {cols[0]:>17} "
+            f"{s.get('residual_speed_m_s', math.nan):10.1f} "
+            f"{s.get('energy_absorbed_J', math.nan):11.1f} {cols[0]:>17} "
             f"{cols[1]:>17}   " + " ".join(f"{x:14.1f}" for x in w)
             + ("" if r["busy"] < 0.1 else f"  ! machine busy ({r['busy']:.2f} other cores)"))
 
@@ -1392,6 +1394,8 @@ def main(argv: list[str] | None = None) -> None:
         return
     loaded_cases = [(n, LOADED_END.get(n, 5e-6)) for n in a.loaded]
     if a.ladder:
+        if a.ladder_levels < 1:
+            p.error(f"--ladder-levels {a.ladder_levels}: allowed: a whole number ≥ 1")
         print_ladder(bench_ladder(a.ladder, a.ladder_levels, a.reference_cache))
         say(f"Other processes used {other_cpu(cpu0):.2f} cores on average while this ran")
         return
