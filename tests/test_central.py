@@ -186,6 +186,45 @@ def test_contact_counts_nodes_once_and_segments_apart(plies, integrator):
     assert (per_ply[:, 1:] == 0).all()
 
 
+def test_a_sticking_segment_keeps_its_material_point_on_the_face():
+    """A free 10 × 10 sheet pushed up by an electric field against the flat end face of a
+    heavy cylinder at rest (radius 3 mm, over the middle of one x-yarn segment, whose end nodes
+    lie 5 mm off its axis: segment contact, no node contact), with a small sideways field
+    component: the in-plane pull of the whole sheet on the segment (≈ 50 nodes × q E_y) is
+    an eighth of the normal push of its two end nodes (2 q E_z), so Coulomb friction
+    (μ_s = 1) holds it: it sticks. Sticking means no motion relative to the body: the
+    segment's midpoint, in the body's frame, stays where it first touched, to round-off. A
+    segment point put only on the closest surface point would keep the tangential drift of
+    each free flight (Δt² F_t/m per step; 1.3 µm here over the 180 µs, at courant 0.25)."""
+    from emfabric._kernels.records import BODY_R0, BODY_X
+
+    sc = make(**{"fabric.nodes": [10, 10], "fabric.size": [0.09, 0.09],
+                 "fabric.rescale": False, "fabric.edges": "free", "fabric.damage.rate": 0.0,
+                 "fabric.material.modulus_cv": 0.0, "field.B": [0, 0, 0],
+                 "field.E": [0.0, 0.006, 1.2], "projectile.shape": "cylinder",
+                 "projectile.radius": 0.003, "projectile.length": 0.02,
+                 "projectile.mass": 5.0, "projectile.axis": [0, 0, -1],
+                 "projectile.position": [0.0, 0.005, 0.01002],
+                 "projectile.velocity": [0.0, 0.0, 0.0], **CD})
+    model = build_model(sc)
+    x0 = initial_state(model).arrays.x
+    a = int(np.flatnonzero(np.isclose(x0[0], -0.005) & np.isclose(x0[1], 0.005))[0])
+    b = int(np.flatnonzero(np.isclose(x0[0], 0.005) & np.isclose(x0[1], 0.005))[0])
+    points = []
+    for end in (2e-5, 1e-4, 2e-4):
+        res = run(sc.replace(**{"solver.end_time": end}))
+        assert res.end_reason == "end_time"
+        x, body = res.state.arrays.x, res.state.arrays.body
+        assert int(res.history.contact_segments[-1]) == 1
+        assert int(res.history.contact_nodes[-1]) == 2
+        mid = 0.5 * (x[:, a] + x[:, b])
+        points.append(body[BODY_R0:BODY_R0 + 3].T @ (mid - body[BODY_X]))
+    # on the end face (10 mm below the centre of mass), over the axis in x by symmetry
+    assert points[0][2] == pytest.approx(-0.01, abs=1e-12)
+    for p in points[1:]:
+        np.testing.assert_allclose(p, points[0], rtol=0, atol=1e-13)
+
+
 SMALL = {"fabric.nodes": [12, 12], "solver.end_time": 120e-6, "output.snapshot_interval": 5e-6,
          "projectile.gap": 0.0, **CD}
 

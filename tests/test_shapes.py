@@ -321,12 +321,14 @@ def _sharp(segments):
 
 
 def test_segment_contact_catches_a_nose_that_passes_between_nodes():
-    """With segment contact the yarns around the cell catch the ogive and throw it back (an
-    intact sheet without damage returns most of the energy); with node contact alone it
-    passes through the cell untouched."""
+    """With segment contact the yarns around the cell catch the ogive and throw it back; with
+    node contact alone it passes through the cell untouched. (How fast it comes back is set
+    by the friction of the four segments sliding along the nose, and depends on the step
+    until courant ≈ 1/32: 19–20 m/s converged, 23.5 m/s at the default step; see
+    docs/theory.md §5.2.)"""
     caught = run(_sharp(True)).history
     assert caught.attrs["end_reason"] == "rebound"
-    assert float(caught.projectile_velocity[-1, 2]) > 0.5 * 50.0
+    assert float(caught.projectile_velocity[-1, 2]) > 0.0
     passed = run(_sharp(False)).history
     assert passed.attrs["end_reason"] == "never touched"
     assert float(passed.projectile_velocity[-1, 2]) == -50.0

@@ -294,7 +294,44 @@ def _segment_point(x1, a, b, centre, body, rot):
 
 
 @njit(cache=True)
-def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work):
+def _drift_segment_ends(yarns, inv_mass, nseg, first, nc, x1, work, lag):
+    """segment_contact's move of the end nodes of its contacts first … nc−1 by lag × the
+    tangential part of their velocity change (summed per yarn family, as the sweeps sum: the
+    result does not depend on the order of the contacts)."""
+    ends = yarns.ends
+    seg_cand, share, acc, flag = work.seg_cand, work.share, work.acc, work.flag
+    c_node, c_node2, c_w = work.c_node, work.c_node2, work.c_w
+    c_imp, c_nrm = work.c_imp, work.c_nrm
+    for idx in range(nseg):
+        for node in (ends[seg_cand[idx], 0], ends[seg_cand[idx], 1]):
+            share[0, node] = 0.0
+            for f in range(2):
+                for c in range(3):
+                    acc[0, f, c, node] = 0.0
+    for kc in range(first, nc):
+        a = c_node[kc]
+        b = c_node2[kc]
+        jn = c_imp[0, kc] * c_nrm[0, kc] + c_imp[1, kc] * c_nrm[1, kc] + c_imp[2, kc] * c_nrm[2, kc]
+        jt = (c_imp[0, kc] - jn * c_nrm[0, kc], c_imp[1, kc] - jn * c_nrm[1, kc],
+              c_imp[2, kc] - jn * c_nrm[2, kc])
+        fam = 0 if b - a == 1 else 1
+        for node, w in ((a, c_w[0, kc]), (b, c_w[1, kc])):
+            if flag[node] >= STICK:
+                continue
+            share[0, node] = 1.0
+            wi = lag * w * inv_mass[node]
+            for c in range(3):
+                acc[0, fam, c, node] += wi * jt[c]
+    for idx in range(nseg):
+        for node in (ends[seg_cand[idx], 0], ends[seg_cand[idx], 1]):
+            if share[0, node] > 0.0:
+                for c in range(3):
+                    x1[c, node] += acc[0, 0, c, node] + acc[0, 1, c, node]
+                share[0, node] = 0.0
+
+
+@njit(cache=True)
+def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, lag):
     """Resolve contact of the candidate segments against the body, after node contact.
 
     A segment presses on the body at its point P = w_a x_a + w_b x_b nearest the body's axis
@@ -315,6 +352,17 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work):
     earlier in the step keeps its contact within shapes.contact_margin outside the surface
     (impulse, no move). Each node sums its warp and its fill contributions apart: the result
     does not depend on the order of the segments, so mirror images stay mirror images.
+
+    With lag > 0 (central differences: lag = Δt) the end nodes of the segments in contact are
+    then moved by lag times the tangential part of the velocity change their impulses gave
+    them (w J_t/m for each of their contacts, J_t the impulse less its part along the contact's
+    normal), except a node in node contact itself (work.flag STICK or SLIDE), which its own
+    placement puts: the drift x_{n+1} = x_n + Δt v_{n+½} redone with the velocity after
+    contact. Without it a sticking segment point keeps the tangential drift of its free flight
+    every step (nodes are put at their material point instead), the next step's impulse takes
+    that back as well, and the friction it needs grows with it: at the default step the
+    ogive's segments stuck where converged runs slide (docs/theory.md §5.2). The φ-scheme
+    passes lag = 0 (no move: its bits are those of the paper's scheme as shipped).
     Appends the contacts after the first nc; returns the new count.
     """
     inv_mass = nodes.inv_mass
@@ -328,6 +376,7 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work):
     vel = b_state[BODY_V]
     omega = (b_state[BODY_W, 0], b_state[BODY_W, 1], b_state[BODY_W, 2])
     rot = b_state[BODY_R0:BODY_R0 + 3]
+    first = nc
     for idx in range(nseg):
         slot[idx] = -1
     # a velocity change below this at every contact point ends the sweeps [m/s]
@@ -437,6 +486,8 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work):
                     share[1, node] = 0.0
         if inside_count == 0 and worst <= settled:
             break
+    if lag > 0.0 and nc > first:
+        _drift_segment_ends(yarns, inv_mass, nseg, first, nc, x1, work, lag)
     # the body's reaction acts where the fabric point now is (the node, or w_a x_a + w_b x_b):
     # the moments the two receive are then exactly opposite, about any point
     for kc in range(nc):

@@ -215,6 +215,8 @@ def _node_contact(phys, sin, sout, work, ncand):
             for c in range(3):
                 now[c, n] = a[c]
         now[3, n] = SLIDE if slid else STICK
+        # (segment contact does not move a node in node contact: contact.segment_contact)
+        work.flag[n] = SLIDE if slid else STICK
         c_node[nc] = n
         c_node2[nc] = -1
         c_w[0, nc] = 1.0
@@ -364,7 +366,7 @@ def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol
         nc = _node_contact(phys, sin, sout, work, ncand)
         if segs is not None:
             nc = segment_contact(nodes, phys.yarns, body, phys.contact, b_out, nseg, nc,
-                                 sout.x, sout.v, work)
+                                 sout.x, sout.v, work, dt)
         reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, reaction[0], reaction[1])
     # energy of the contacts (velocities before and after the impulses, at the half step)
     d_cont = 0.0

@@ -93,7 +93,7 @@ class CentralDifference(IntegratorBase):
             out.append((ply_contact, (phys, a.x, a.v, a.f, work, 0.0, a.contact[3])))
         if segs is not None:
             out.append((segment_contact, (phys.nodes, phys.yarns, phys.body, phys.contact,
-                                          a.body, 0, 0, a.x, a.v, work)))
+                                          a.body, 0, 0, a.x, a.v, work, 0.0)))
         out += [(stable_step, (phys, a.x, a.alpha, self.scratch)),
                 (travel_step, (phys, a.x, a.v, a.body))]
         return out
