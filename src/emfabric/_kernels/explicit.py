@@ -20,7 +20,9 @@ law (contact.contact_impulse: stick to the surface point's velocity, else Coulom
 that sticks is put on the surface and remembers the body-frame material point it sticks to
 (StateArrays.contact); a node that stuck in the previous step is put where that material point
 has moved to — not projected radially, which lags the surface by the tangential drift of the
-step. Segments (contact.segment_contact) as in the φ-scheme.
+step. Segments (contact.segment_contact) as in the φ-scheme, and then the end nodes of the
+segments in contact drift again by Δt times the tangential part of their velocity change, so
+that a sticking segment point moves with the surface too (docs/theory.md §5.2).
 
 Energy: the kicks and the impulses change the kinetic energy by exactly the work booked (field
 and gravity work as h/2 f·v̄ of each kick, contact and friction as J·(v̄_node − v̄_point)); the
