@@ -98,6 +98,22 @@ def main() -> None:
                   f"U*^(1/3) = {u_star ** (1 / 3):6.1f} m/s, A_d A_p/m_p = "
                   f"{rows[-1]['x']:.4f}, V50/U*^(1/3) = {rows[-1]['y']:.3f}", flush=True)
 
+    import numpy as np
+
+    # does one curve hold them? a power law y = c x^k by least squares in log-log, and each
+    # point's residual from it
+    k, logc = np.polyfit(np.log([r["x"] for r in rows]), np.log([r["y"] for r in rows]), 1)
+    power = {"c": float(math.exp(logc)), "k": float(k),
+             "residuals": [r["y"] / (math.exp(logc) * r["x"] ** k) - 1.0 for r in rows]}
+    print(f"power law through the six: V_BL/U*^(1/3) = {power['c']:.3g} (A_d A_p/m_p)^"
+          f"{power['k']:.2f}; residuals "
+          f"{', '.join(f'{100 * e:+.0f} %' for e in power['residuals'])} (rms "
+          f"{100 * math.sqrt(statistics.mean(e * e for e in power['residuals'])):.1f} %)")
+    for r in rows:
+        lj = r["lambert_jonas"]
+        print(f"{r['case']:>24}: Lambert–Jonas a = {lj['a']:.2f}, p = {lj['p']:.2f}, rms "
+              f"residual {lj['rms_residual']:.1f} m/s")
+
     # the spread that strength scatter gives: V_BL of the same ply for several draws of the
     # yarns' strengths (fabric.material.seed), Weibull modulus 5 against none (the modulus
     # scatter, cv 0.1, is drawn from the same seed in both)
@@ -117,7 +133,8 @@ def main() -> None:
               f"{', '.join(f'{v:.1f}' for v in limits)} m/s: mean {spread[m]['mean']:.1f}, "
               f"standard deviation {spread[m]['stdev']:.1f} m/s", flush=True)
     (a.out / "material_study.json").write_text(json.dumps(
-        {"cunniff": rows, "v50_spread": {str(k): v for k, v in spread.items()}}, indent=2))
+        {"cunniff": rows, "power_law": power,
+         "v50_spread": {str(m): v for m, v in spread.items()}}, indent=2))
 
     import matplotlib
 
@@ -129,14 +146,15 @@ def main() -> None:
         pts = [(r["x"], r["y"]) for r in rows if r["style"] == style]
         ax.plot(*zip(*pts, strict=True), marker=marker, ls="", ms=8,
                 label=f"{fabric_style(style).material} ({style})")
+    xs = np.geomspace(min(r["x"] for r in rows), max(r["x"] for r in rows), 50)
+    ax.plot(xs, power["c"] * xs ** power["k"], "k--", lw=0.8,
+            label=f"{power['c']:.3g} $x^{{{power['k']:.2f}}}$ (least squares, log–log)")
     ax.set_xlabel(r"$A_d A_p / m_p$ [-]")
     ax.set_ylabel(r"$V_{50} / U^{*1/3}$ [-]")
     ax.set_xscale("log")
     ax.set_title("Single plies vs a .22 FSP, Cunniff's dimensionless form")
     ax.legend(fontsize=8)
     fig.savefig(a.out / "cunniff.png", dpi=130)
-
-    import numpy as np
 
     from emfabric.studies.ballistic import lambert_jonas
 

@@ -461,3 +461,23 @@ def test_ballistic_figure_with_seeds():
     assert any(t.startswith("logistic fit: V50 = 53 m/s") for t in legend)
     # the seeded shots stay out of the first panel and of the flags
     assert non_monotone(res["shots"], res["v_bl"]) == res["non_monotone"]
+
+
+def test_ballistic_figure_of_shots_that_separate(recwarn):
+    """Seeded shots that separate completely have no logistic fit (fit_v50): the panel draws
+    the step at the gap's middle, without an overflow warning."""
+    from emfabric.studies.ballistic import fit_v50
+
+    res = ballistic_result()
+    v = np.repeat(np.linspace(45, 60, 9), 2)
+    seeded = [{"speed": float(x), "seed": 1 + k % 2, "perforated": int(x > 53),
+               "residual_speed": 1.0, "status": "complete", "key": f"s{k}"}
+              for k, x in enumerate(v)]
+    res["shots"] += seeded
+    res["v50"] = fit_v50([s["speed"] for s in seeded], [s["perforated"] for s in seeded])
+    res["seeds"] = 2
+    fig = ballistic_plot(res, lambert_jonas)
+    legend = [t.get_text() for t in fig.axes[1].get_legend().get_texts()]
+    assert any(t.startswith("shots separate: V50 = 53.44 m/s, between 52.5 and 54.38")
+               for t in legend), legend
+    assert not [w for w in recwarn if issubclass(w.category, RuntimeWarning)]

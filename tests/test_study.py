@@ -271,6 +271,23 @@ def test_logistic_v50_fit_recovers_a_known_v50():
         fit_v50([1.0, 2.0], [1, 1])
 
 
+def test_v50_of_shots_that_separate_is_the_gap():
+    """Every stopped shot slower than every perforating one: the logistic likelihood has no
+    maximum (it grows as s → 0 for any V50 in the gap), so V50 is the gap's middle, its
+    interval the gap, and no spread is claimed; an overlap restores an ordinary fit."""
+    from emfabric.studies.ballistic import fit_v50
+
+    v = [81.11, 81.11, 86.18, 86.18, 91.25, 91.25, 96.32, 96.32]
+    fit = fit_v50(v, [0, 0, 0, 0, 1, 1, 1, 1], bootstrap=50)
+    assert fit["separated"] is True
+    assert fit["v50"] == pytest.approx(0.5 * (86.18 + 91.25), abs=1e-12)
+    assert fit["ci95"] == [86.18, 91.25] and fit["sigma"] == 0.0 and fit["scale"] == 0.0
+    # one shot at 86.18 m/s perforated and one at 91.25 m/s did not: they overlap, a real fit
+    fit = fit_v50(v, [0, 0, 0, 1, 0, 1, 1, 1], bootstrap=50)
+    assert fit["separated"] is False and fit["sigma"] > 0.0
+    assert 81.11 < fit["v50"] < 91.25
+
+
 def _direct_shot(speed):
     """The CLI's scenario fired at `speed` straight down by emfabric.run alone (no study code);
     the outcome read off the trajectory: +1 through (moving on below the sheet, nothing

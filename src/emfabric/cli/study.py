@@ -329,5 +329,11 @@ def ballistic_limit(
                       f"{', '.join(str(f) for f in files)}")
         if "v50" in res:
             v = res["v50"]
-            console.print(f"V50 = {v['v50']:.4g} m/s, 95 % [{v['ci95'][0]:.4g}, "
-                          f"{v['ci95'][1]:.4g}], σ = {v['sigma']:.3g} m/s")
+            if v.get("separated"):
+                console.print(f"V50 = {v['v50']:.4g} m/s: the seeded shots separate completely "
+                              f"(every shot at {v['ci95'][0]:.4g} m/s or slower stopped, every "
+                              f"one at {v['ci95'][1]:.4g} m/s or faster perforated), so V50 "
+                              "lies in that gap and no spread is resolved (σ below the gap)")
+            else:
+                console.print(f"V50 = {v['v50']:.4g} m/s, 95 % [{v['ci95'][0]:.4g}, "
+                              f"{v['ci95'][1]:.4g}], σ = {v['sigma']:.3g} m/s")

@@ -57,13 +57,24 @@ def fit_lambert_jonas(vs, vr, vbl_guess: float) -> dict[str, float]:
 
 def fit_v50(speeds, perforated, bootstrap: int = 500, seed: int = 0) -> dict[str, float]:
     """Maximum-likelihood logistic fit of P(perforation | v): V50, the scale s (spread σ =
-    sπ/√3) and a bootstrap 95 % interval of V50 (resampling the shots)."""
+    sπ/√3) and a bootstrap 95 % interval of V50 (resampling the shots); "separated" False.
+
+    Shots that separate completely (every stopped shot at most as fast as every perforating
+    one) have no maximum-likelihood fit: the likelihood grows without bound as s → 0, for any
+    V50 in the gap. Then V50 is the middle of the gap between the fastest stopped and the
+    slowest perforating shot, the interval is the gap itself, s = σ = 0 (no spread resolved:
+    it is smaller than the gap) and "separated" is True — not the arbitrary V50 and vanishing
+    interval a minimiser stops at."""
     from scipy.optimize import minimize
 
     v = np.asarray(speeds, dtype=float)
     y = np.asarray(perforated, dtype=float)
     if not (0 < y.sum() < y.size):
         raise ValueError("V50 needs shots that perforate and shots that do not")
+    stopped_max, perforated_min = float(v[y == 0].max()), float(v[y == 1].min())
+    if stopped_max <= perforated_min:
+        return {"v50": 0.5 * (stopped_max + perforated_min), "scale": 0.0, "sigma": 0.0,
+                "ci95": [stopped_max, perforated_min], "shots": int(v.size), "separated": True}
 
     def nll(theta, v, y):
         v50, log_s = theta
@@ -86,7 +97,7 @@ def fit_v50(speeds, perforated, bootstrap: int = 500, seed: int = 0) -> dict[str
             boot.append(fit(v[idx], y[idx])[0])
     lo, hi = (np.percentile(boot, [2.5, 97.5]) if boot else (math.nan, math.nan))
     return {"v50": v50, "scale": s, "sigma": s * math.pi / math.sqrt(3.0),
-            "ci95": [float(lo), float(hi)], "shots": int(v.size)}
+            "ci95": [float(lo), float(hi)], "shots": int(v.size), "separated": False}
 
 
 def shot(scenario: Scenario, speed: float, seed: int | None = None,

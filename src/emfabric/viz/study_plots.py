@@ -540,9 +540,16 @@ def ballistic_plot(res: dict[str, Any], lambert_jonas) -> Figure:
                  label="seeded shots (1 perforated, 0 stopped)")
         fit = res["v50"]
         g = np.linspace(v.min(), v.max(), 300)
-        ax2.plot(g, 1.0 / (1.0 + np.exp(-(g - fit["v50"]) / fit["scale"])), "-",
-                 label=f"logistic fit: V50 = {fit['v50']:.4g} m/s, 95 % "
-                       f"[{fit['ci95'][0]:.4g}, {fit['ci95'][1]:.4g}]")
+        if fit.get("separated") or fit["scale"] <= 0.0:
+            # no spread resolved: the shots separate at the gap (studies.ballistic.fit_v50)
+            ax2.plot(g, (g >= fit["v50"]).astype(float), "-",
+                     label=f"shots separate: V50 = {fit['v50']:.4g} m/s, between "
+                           f"{fit['ci95'][0]:.4g} and {fit['ci95'][1]:.4g}")
+        else:
+            # 1/(1 + e^{-z}) as (1 + tanh(z/2))/2: no overflow for a small scale
+            ax2.plot(g, 0.5 * (1.0 + np.tanh(0.5 * (g - fit["v50"]) / fit["scale"])), "-",
+                     label=f"logistic fit: V50 = {fit['v50']:.4g} m/s, 95 % "
+                           f"[{fit['ci95'][0]:.4g}, {fit['ci95'][1]:.4g}]")
         ax2.set_xlabel("striking speed $v_s$ [m/s]")
         ax2.set_ylabel("perforation probability")
         ax2.set_title(f"{res.get('seeds', '')} seeds: modulus scatter and impact jitter",
