@@ -152,8 +152,17 @@ def find_candidates(x, inv_mass, centre, reach, cand, flag):
     return count
 
 
-SEGMENT_SWEEPS = 8
-"""Jacobi passes of segment contact per iterate (each halves the shared residual, at worst)."""
+SEGMENT_SWEEPS = 256
+"""The most Jacobi passes of segment contact per call: a guard, not the criterion. The passes
+stop when no contact point is inside by more than SEGMENT_INSIDE and none's velocity changes by
+more than SEGMENT_SETTLED; the ogive at the default step needs 33 passes on average, 47 at most
+(8, the cap before, left the shared corrections unconverged at kN loads: docs/theory.md §5.2)."""
+SEGMENT_INSIDE = 1e-9
+"""A contact point inside the body by less than this fraction of its bounding radius counts as
+on the surface (round-off of the move to the surface: < 1e-11 m on a 7.6 mm nose)."""
+SEGMENT_SETTLED = 1e-9
+"""Velocity change at every contact point that ends the passes, as a fraction of the body's
+speed scale |v| + R|ω|."""
 
 
 @njit(cache=True)
@@ -294,16 +303,15 @@ def _segment_point(x1, a, b, centre, body, rot):
 
 
 @njit(cache=True)
-def _drift_segment_ends(yarns, inv_mass, nseg, first, nc, x1, work, lag):
+def _drift_segment_ends(inv_mass, first, nc, x1, work, lag):
     """segment_contact's move of the end nodes of its contacts first … nc−1 by lag × the
     tangential part of their velocity change (summed per yarn family, as the sweeps sum: the
     result does not depend on the order of the contacts)."""
-    ends = yarns.ends
-    seg_cand, share, acc, flag = work.seg_cand, work.share, work.acc, work.flag
+    share, acc, flag = work.share, work.acc, work.flag
     c_node, c_node2, c_w = work.c_node, work.c_node2, work.c_w
     c_imp, c_nrm = work.c_imp, work.c_nrm
-    for idx in range(nseg):
-        for node in (ends[seg_cand[idx], 0], ends[seg_cand[idx], 1]):
+    for kc in range(first, nc):
+        for node in (c_node[kc], c_node2[kc]):
             share[0, node] = 0.0
             for f in range(2):
                 for c in range(3):
@@ -322,8 +330,8 @@ def _drift_segment_ends(yarns, inv_mass, nseg, first, nc, x1, work, lag):
             wi = lag * w * inv_mass[node]
             for c in range(3):
                 acc[0, fam, c, node] += wi * jt[c]
-    for idx in range(nseg):
-        for node in (ends[seg_cand[idx], 0], ends[seg_cand[idx], 1]):
+    for kc in range(first, nc):
+        for node in (c_node[kc], c_node2[kc]):
             if share[0, node] > 0.0:
                 for c in range(3):
                     x1[c, node] += acc[0, 0, c, node] + acc[0, 1, c, node]
@@ -346,12 +354,14 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, la
     up to more than one full correction (no overshoot), and the share varies continuously as a
     segment enters or leaves the body (a count would jump, and the fixed-point iteration would
     cycle). The pass is repeated on the corrected positions and velocities for the segments in
-    contact (SEGMENT_SWEEPS times at most, until none is inside and no contact point's velocity
-    changes by more than 10⁻⁹ of the body's speed), each contact's impulses adding up, so that
-    the shared corrections converge to the full ones. As for nodes, a segment in contact
-    earlier in the step keeps its contact within shapes.contact_margin outside the surface
-    (impulse, no move). Each node sums its warp and its fill contributions apart: the result
-    does not depend on the order of the segments, so mirror images stay mirror images.
+    contact, until none is inside (SEGMENT_INSIDE) and no contact point's velocity changes by
+    more than SEGMENT_SETTLED of the body's speed (SEGMENT_SWEEPS passes at most, a guard),
+    each contact's impulses adding up, so that the shared corrections converge to the full
+    ones; the later passes visit only the segments the first found in contact. As for
+    nodes, a segment in contact earlier in the step keeps its contact within
+    shapes.contact_margin outside the surface (impulse, no move). Each node sums its warp and
+    its fill contributions apart: the result does not depend on the order of the segments, so
+    mirror images stay mirror images.
 
     With lag > 0 (central differences: lag = Δt) the end nodes of the segments in contact are
     then moved by lag times the tangential part of the velocity change their impulses gave
@@ -368,7 +378,7 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, la
     inv_mass = nodes.inv_mass
     ends = yarns.ends
     seg_cand, share, acc = work.seg_cand, work.share, work.acc
-    active, slot, tmp = work.seg_active, work.seg_slot, work.seg_tmp
+    active, slot, tmp, seg_list = work.seg_active, work.seg_slot, work.seg_tmp, work.seg_list
     c_node, c_node2, c_w = work.c_node, work.c_node2, work.c_w
     c_imp, c_arm, c_nrm = work.c_imp, work.c_arm, work.c_nrm
     keep = contact_margin(body)
@@ -380,12 +390,18 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, la
     for idx in range(nseg):
         slot[idx] = -1
     # a velocity change below this at every contact point ends the sweeps [m/s]
-    settled = 1e-9 * (math.sqrt(vel[0] * vel[0] + vel[1] * vel[1] + vel[2] * vel[2])
+    settled = SEGMENT_SETTLED * (math.sqrt(vel[0] * vel[0] + vel[1] * vel[1] + vel[2] * vel[2])
                       + bounding_radius(body) * math.sqrt(omega[0] * omega[0]
                                                           + omega[1] * omega[1]
                                                           + omega[2] * omega[2]))
+    inside = -SEGMENT_INSIDE * bounding_radius(body)
+    # the first pass visits every candidate and lists those in contact; the later passes
+    # revisit only these (a pass then costs the contacts, not the candidates)
+    listed = 0
     for sweep in range(SEGMENT_SWEEPS):
-        for idx in range(nseg):
+        visit = nseg if sweep == 0 else listed
+        for i in range(visit):
+            idx = i if sweep == 0 else seg_list[i]
             for node in (ends[seg_cand[idx], 0], ends[seg_cand[idx], 1]):
                 for f in range(2):
                     share[f, node] = 0.0
@@ -394,11 +410,9 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, la
                             acc[q, f, c, node] = 0.0
         found = 0
         inside_count = 0
-        for idx in range(nseg):
+        for i in range(visit):
+            idx = i if sweep == 0 else seg_list[i]
             tmp[6, idx] = 0.0
-            # after the first pass only the segments already in contact are revisited
-            if sweep > 0 and slot[idx] < 0:
-                continue
             s = seg_cand[idx]
             a = ends[s, 0]
             b = ends[s, 1]
@@ -425,6 +439,8 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, la
                   wa * v1[2, a] + wb * v1[2, b])
             j, _slid = contact_impulse(1.0 / k, vp, vs, nh, law, 0)
             if slot[idx] < 0:
+                seg_list[listed] = idx
+                listed += 1
                 slot[idx] = nc
                 c_node[nc] = a
                 c_node2[nc] = b
@@ -442,7 +458,7 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, la
             # segment enters (g = 0) and leaves (g = keep)
             dep = keep - g
             tmp[6, idx] = dep
-            if g < 0.0:
+            if g < inside:
                 inside_count += 1
             fam = 0 if b - a == 1 else 1
             share[fam, a] += dep
@@ -451,7 +467,8 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, la
         if found == 0:
             break
         worst = 0.0
-        for idx in range(nseg):
+        for i in range(listed):
+            idx = seg_list[i]
             dep = tmp[6, idx]
             if dep == 0.0:
                 continue
@@ -476,7 +493,8 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, la
                 for c in range(3):
                     acc[0, fam, c, node] += wi * move * tmp[3 + c, idx]
                     acc[1, fam, c, node] += wi * scale * tmp[c, idx]
-        for idx in range(nseg):
+        for i in range(listed):
+            idx = seg_list[i]
             for node in (ends[seg_cand[idx], 0], ends[seg_cand[idx], 1]):
                 if share[0, node] + share[1, node] > 0.0:
                     for c in range(3):
@@ -487,7 +505,7 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, la
         if inside_count == 0 and worst <= settled:
             break
     if lag > 0.0 and nc > first:
-        _drift_segment_ends(yarns, inv_mass, nseg, first, nc, x1, work, lag)
+        _drift_segment_ends(inv_mass, first, nc, x1, work, lag)
     # the body's reaction acts where the fabric point now is (the node, or w_a x_a + w_b x_b):
     # the moments the two receive are then exactly opposite, about any point
     for kc in range(nc):

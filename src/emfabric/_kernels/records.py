@@ -457,6 +457,9 @@ class Work(NamedTuple):
     """The contact record of each candidate segment in the current iterate, −1 for none."""
     seg_tmp: np.ndarray
     """One segment-contact pass: impulse, move to the surface and weight, (7, seg_count)."""
+    seg_list: np.ndarray
+    """The candidate indices of the segments in contact in segment_contact's first pass, in
+    candidate order (the later passes revisit only these)."""
     counts: np.ndarray
     """[candidate nodes, candidate segments] of the current attempt (int64)."""
     v_pre: np.ndarray
@@ -550,6 +553,7 @@ def make_work(node_count: int, row_count: int, seg_total: int, seg_count: int = 
                 np.empty(max(seg_count, 1), dtype=np.int64),
                 np.zeros(max(seg_count, 1), dtype=np.int8),
                 np.empty(max(seg_count, 1), dtype=np.int64), np.zeros((7, max(seg_count, 1))),
+                np.empty(max(seg_count, 1), dtype=np.int64),
                 np.zeros(2, dtype=np.int64),
                 np.empty((3, n)), np.zeros((2, ns)), np.zeros((2, 2, 3, ns)),
                 np.empty(nmax, dtype=np.int64), np.empty(nmax, dtype=np.int64),
