@@ -159,7 +159,7 @@ more than SEGMENT_SETTLED; the ogive at the default step needs 33 passes on aver
 (8, the cap before, left the shared corrections unconverged at kN loads: docs/theory.md §5.2)."""
 SEGMENT_INSIDE = 1e-9
 """A contact point inside the body by less than this fraction of its bounding radius counts as
-on the surface (round-off of the move to the surface: < 1e-11 m on a 7.6 mm nose)."""
+on the surface (the round-off of the move to the surface: 2e-11 m for a body 2 cm across)."""
 SEGMENT_SETTLED = 1e-9
 """Velocity change at every contact point that ends the passes, as a fraction of the body's
 speed scale |v| + R|ω|."""
@@ -390,10 +390,10 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, la
     for idx in range(nseg):
         slot[idx] = -1
     # a velocity change below this at every contact point ends the sweeps [m/s]
-    settled = SEGMENT_SETTLED * (math.sqrt(vel[0] * vel[0] + vel[1] * vel[1] + vel[2] * vel[2])
-                      + bounding_radius(body) * math.sqrt(omega[0] * omega[0]
-                                                          + omega[1] * omega[1]
-                                                          + omega[2] * omega[2]))
+    settled = SEGMENT_SETTLED * (
+        math.sqrt(vel[0] * vel[0] + vel[1] * vel[1] + vel[2] * vel[2])
+        + bounding_radius(body) * math.sqrt(omega[0] * omega[0] + omega[1] * omega[1]
+                                            + omega[2] * omega[2]))
     inside = -SEGMENT_INSIDE * bounding_radius(body)
     # the first pass visits every candidate and lists those in contact; the later passes
     # revisit only these (a pass then costs the contacts, not the candidates)
