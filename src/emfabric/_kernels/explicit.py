@@ -25,9 +25,11 @@ segments in contact drift again by Δt times the tangential part of their veloci
 that a sticking segment point moves with the surface too (docs/theory.md §5.2).
 
 Energy: the kicks and the impulses change the kinetic energy by exactly the work booked (field
-and gravity work as h/2 f·v̄ of each kick, contact and friction as J·(v̄_node − v̄_point)); the
-yarns' work is the trapezoid h/2 (f_n + f_{n+1})·v_{n+½} of their energy change, so the balance
-error measures the scheme's own error, O(h²) per unit time.
+and gravity work as h/2 f·v̄ of each kick, the impulses' J·(v̄_point − v̄_node), of which the
+work friction does against the slip is booked as friction (_friction_work), the rest as
+contact); the yarns' work is the trapezoid h/2 (f_n + f_{n+1})·v_{n+½} of their energy change,
+and their work over the placement as projection, so the balance error measures the scheme's
+own error, O(h²) per unit time.
 """
 
 import math
@@ -51,6 +53,9 @@ from emfabric._kernels.fields import (
     field_at,
     fill_node_fields,
     has_electric_field,
+    magnetic_force,
+    node_field_of,
+    uniform_field,
     with_sources,
 )
 from emfabric._kernels.materials import damage_thresholds, stretch_sq, tangent_factor
@@ -234,6 +239,53 @@ def _node_contact(phys, sin, sout, work, ncand):
 
 
 @njit(cache=True)
+def _friction_work(phys, sin, sout, work, nc, half, omega):
+    """The work friction does against the slip over the step [J]: for each of the nc contacts,
+    J_t·(s₀ + s₁)/2, the slip velocities s = v_point − v_fabric of the contact point (a node, or
+    w_a, w_b of a segment's two nodes) at the start of the step, v_n − h/(2m)(f_n − q v_n × B)
+    (the velocity after the previous step's contact), and after the impulses, against the
+    surface point's velocity the impulses were computed with (the body's half-step velocity in
+    sout.body, `omega`). A contact that sticks (s₀ = s₁ = 0) does no work; one that slides at s
+    does μ_d J_n |s|; a node that strikes sliding, μ_d J_n times the mean slip of its impulse.
+    The identity split of impulse_dissipation books J_t·(s⁻ + s₁)/2 instead, with s⁻ before
+    the impulse: that holds the tangential velocity the step's own force gave the contact too,
+    k|J_t|²/2 a step for a contact held by friction, which the placement's work cancels (at
+    kilonewton loads hundreds of joules over a run, none of it slip)."""
+    nodes, fld = phys.nodes, phys.field
+    inv_mass, charge = nodes.inv_mass, nodes.charge
+    uni, sourced = uniform_field(fld)
+    nf = work.node_field
+    x0, v0, f0, v1 = sin.x, sin.v, sin.f, sout.v
+    vel = sout.body[BODY_V]
+    c_node, c_node2, c_w = work.c_node, work.c_node2, work.c_w
+    c_imp, c_arm, c_nrm = work.c_imp, work.c_arm, work.c_nrm
+    d = 0.0
+    for k in range(nc):
+        start = (0.0, 0.0, 0.0)
+        after = (0.0, 0.0, 0.0)
+        for e in range(2):
+            n = c_node[k] if e == 0 else c_node2[k]
+            if n < 0:
+                continue
+            w = c_w[e, k]
+            _e, b = node_field_of(uni, sourced, nf, n, (x0[0, n], x0[1, n], x0[2, n]))
+            fm = magnetic_force(charge[n], (v0[0, n], v0[1, n], v0[2, n]), b)
+            hk = half * inv_mass[n]
+            start = (start[0] + w * (v0[0, n] - hk * (f0[0, n] - fm[0])),
+                     start[1] + w * (v0[1, n] - hk * (f0[1, n] - fm[1])),
+                     start[2] + w * (v0[2, n] - hk * (f0[2, n] - fm[2])))
+            after = (after[0] + w * v1[0, n], after[1] + w * v1[1, n], after[2] + w * v1[2, n])
+        wr = cross(omega, (c_arm[0, k], c_arm[1, k], c_arm[2, k]))
+        u = (vel[0] + wr[0], vel[1] + wr[1], vel[2] + wr[2])
+        nh = (c_nrm[0, k], c_nrm[1, k], c_nrm[2, k])
+        jv = (c_imp[0, k], c_imp[1, k], c_imp[2, k])
+        jn = jv[0] * nh[0] + jv[1] * nh[1] + jv[2] * nh[2]
+        for c in range(3):
+            d += (jv[c] - jn * nh[c]) * 0.5 * ((u[c] - start[c]) + (u[c] - after[c]))
+    return d
+
+
+@njit(cache=True)
 def _body_field_work(phys, b0, b1, t0, t1):
     """Work of the electric field on the body's charges over the step [J] (the mean field at
     the two ends times each charge's displacement)."""
@@ -385,6 +437,13 @@ def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol
         w_mean = (0.5 * (w_pre[0] + w_post[0]), 0.5 * (w_pre[1] + w_post[1]),
                   0.5 * (w_pre[2] + w_post[2]))
         d_cont, d_fric = impulse_dissipation(nc, work, work.v_pre, sout.v, v_mean, w_mean)
+        # friction is booked as the work it does against the slip (_friction_work); the
+        # kinetic energy its impulse takes beyond that (what the step's force gave a contact
+        # before the impulse, ~k|J_t|²/2 a step: O(Δt) in all, which the placement's work
+        # cancels) goes with the normal part: the two still add up to what the impulses remove
+        d_slip = _friction_work(phys, sin, sout, work, nc, half, w_pre)
+        d_cont += d_fric - d_slip
+        d_fric = d_slip
         # the body after the impulses, then its field wrench and the second half kick
         for c in range(3):
             b_out[BODY_V, c] += reaction[0, c] / body.mass

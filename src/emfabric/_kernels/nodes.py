@@ -696,14 +696,16 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
             worst = max(worst, 2.0 * ((buf[RKW, u] + buf[RKW, u + uint64(1)])
                                       + (buf[rku, u] + buf[rkd, u])) * inv_mass[uint64(nb + i)])
         sums[SUM_STIFFNESS, j] = worst
-        # the work of the force over the placement of the candidates (central_step)
+        # the work of the yarn force over the placement of the candidates (central_step); the
+        # field's and gravity's are booked from the kicks' velocities, which see no placement
         proj = 0.0
         for i in range(nx):
             n = nb + i
             if flag[n] != 0:
+                ee, _b = node_field_of(uni, sourced, nf, n, (x1[0, n], x1[1, n], x1[2, n]))
                 for c in range(3):
-                    proj += buf[rf + c, i] * (x1[c, n] - xbuf[c, n]
-                                              - half * (v1[c, n] - v_pre[c, n]))
+                    fy = buf[rf + c, i] - (charge[n] * ee[c] + mass[n] * grav[c])
+                    proj += fy * (x1[c, n] - xbuf[c, n] - half * (v1[c, n] - v_pre[c, n]))
         sums[SUM_PROJECTION, j] = proj
         _rotate_row(nb, nx, inv_mass, charge, uni, sourced, nf, x1, half, v1, (0, nb), buf)
         for i in range(nx):

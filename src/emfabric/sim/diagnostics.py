@@ -63,8 +63,9 @@ ATTRIBUTES: dict[str, tuple[str, str]] = {
     "min_damage": ("1", "smallest yarn damage variable α (1 intact)"),
     "work_field": ("J", "work of the electric field on fabric and projectile (cumulative)"),
     "work_gravity": ("J", "work of gravity (cumulative)"),
-    "dissipation_friction": ("J", "energy dissipated by friction impulses (cumulative)"),
-    "dissipation_contact": ("J", "energy dissipated by normal contact impulses (cumulative)"),
+    "dissipation_friction": ("J", "work of friction against the slip (cumulative)"),
+    "dissipation_contact": ("J", "kinetic energy the contact impulses remove, less friction's "
+                            "(cumulative)"),
     "dissipation_projection": ("J", "work lost in contact position projections (cumulative)"),
     "dissipation_damage": ("J", "energy released by yarn damage (cumulative)"),
     "energy_balance_error": ("J", "kinetic + strain + dissipated − work − initial energy"),
