@@ -357,3 +357,44 @@ def test_a_pack_gives_the_same_numbers_on_any_thread_count():
     assert float(one.history.max_deflection_per_ply[-1, 1]) > 0.0
     for name in ("node_x", "node_v", "body"):
         np.testing.assert_array_equal(getattr(one.state, name), getattr(two.state, name))
+
+
+@pytest.mark.parametrize("integrator", ["central-difference", "phi"])
+@pytest.mark.parametrize("pull", [0.0, 1.5])
+def test_a_ply_pressed_onto_the_next_by_a_field(integrator, pull):
+    """Two free rigid 2 × 2 plies (all nodes alike: no yarn stretches), touching; the top one
+    charged (q per node), the lower one not, E = (0, E_y, −E_z) presses the top ply onto the
+    lower one. Closed form per node pair (mass m each): the pack's momentum grows by 4 q E t
+    (exact: no other force acts on it); pressed (E_y = 0) the plies move as one at
+    q E_z t/(2m); E_y = 1.25 E_z > μ_s E_z slides the top ply over the lower one, which is
+    dragged by μ_d N (N = q E_z/2 per node): v_y = μ_d q E_z t/(2m) below, q (E_y − μ_d E_z/2)
+    t/m above. No yarn stretches, so the energy budget closes to round-off: the placement's
+    work is the yarns' alone (plies._apply; with the field's too, central differences booked
+    h²|qE|²/2m a step twice and the divergence guard stopped the pressed pack at its first
+    step)."""
+    ez, end = 1.2, (20e-6 if pull == 0.0 else 5e-6)
+    sc = make(**{"fabric.nodes": [2, 2], "fabric.size": [0.002, 0.002], "fabric.plies": 2,
+                 "fabric.ply": [{}, {"charge_per_node": 0.0}], "fabric.rescale": False,
+                 "fabric.edges": "free", "fabric.damage.rate": 0.0,
+                 "fabric.material.modulus_cv": 0.0, "field.B": [0, 0, 0],
+                 "field.E": [0.0, pull, -ez], "projectile.shape": "none",
+                 "solver.end_time": end, "solver.integrator": integrator})
+    model = build_model(sc)
+    q, m = float(model.nodes.charge[0]), float(model.nodes.mass[0])
+    assert float(model.nodes.charge[4:].max()) == 0.0
+    res = run(sc)
+    h, v = res.history, res.state.arrays.v
+    t = float(h.time[-1])
+    assert t == pytest.approx(end)
+    momentum = m * v.sum(axis=1)
+    assert momentum[2] == pytest.approx(-4 * q * ez * t, rel=1e-9)
+    assert momentum[1] == pytest.approx(4 * q * pull * t, rel=1e-9, abs=1e-15)
+    # the plies move as one along the normal (the φ-scheme's penalty lets them breathe a little)
+    np.testing.assert_allclose(v[2], -q * ez * t / (2 * m), rtol=5e-3)
+    if pull > 0.0:
+        mu_s, mu_d = sc.contact.static_friction, sc.contact.dynamic_friction
+        assert pull > mu_s * ez
+        np.testing.assert_allclose(v[1, 4:], mu_d * q * ez * t / (2 * m), rtol=1e-2)
+        np.testing.assert_allclose(v[1, :4], q * (pull - mu_d * ez / 2) * t / m, rtol=1e-2)
+    assert res.status == "complete"
+    assert abs(float(h.energy_balance_error[-1])) < 1e-9 * float(h.work_field[-1])

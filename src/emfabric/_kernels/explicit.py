@@ -466,7 +466,7 @@ def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol
     d_ply = 0.0
     w_ply = 0.0
     if plies is not None:
-        d_ply, w_ply = ply_contact(phys, sout.x, sout.v, sin.f, work, half, sout.contact[3])
+        d_ply, w_ply = ply_contact(phys, sin, sout.x, sout.v, work, half, sout.contact[3])
     # the forces at the new positions and time (the one force evaluation of the step), the
     # second half rotation and kick
     if with_sources(fld):

@@ -26,6 +26,7 @@ import numpy as np
 from numba import njit
 
 from emfabric._kernels.contact import contact_impulse, ply_penalty
+from emfabric._kernels.fields import magnetic_force, node_field_of, uniform_field
 from emfabric._kernels.records import ROW_COUNT
 
 
@@ -329,14 +330,37 @@ def ply_forces(phys, x, v, v_start, work, out, phi_dt):
     return touched
 
 
+@njit(cache=True, inline="always")
+def _yarn_force(phys, sin, nf, n):
+    """The yarn force on node n at the start of the step: the State's force sin.f (the whole
+    ψ_n with q v_n × B) less the electric force q E (sin.e), gravity and q v_n × B(x_n) (nf: the
+    node fields of the step's start, as the drift used them)."""
+    nodes, fld = phys.nodes, phys.field
+    uni, sourced = uniform_field(fld)
+    x0, v0 = sin.x, sin.v
+    _e, b = node_field_of(uni, sourced, nf, n, (x0[0, n], x0[1, n], x0[2, n]))
+    q, m = nodes.charge[n], nodes.mass[n]
+    fm = magnetic_force(q, (v0[0, n], v0[1, n], v0[2, n]), b)
+    g = fld.gravity
+    return (sin.f[0, n] - q * sin.e[0, n] - m * g[0] - fm[0],
+            sin.f[1, n] - q * sin.e[1, n] - m * g[1] - fm[1],
+            sin.f[2, n] - q * sin.e[2, n] - m * g[2] - fm[2])
+
+
 @njit(cache=True)
-def _apply(nodes, law, x, v, f, acc, lag, lo, hi, flag):
+def _apply(phys, sin, x, v, acc, lag, lo, hi, flag, nf):
     """Apply the summed impulses and placements of nodes lo..hi − 1 (and clear them). Returns
-    (dissipation [J]: the kinetic energy the impulses took; the work of the force f over the
-    displacement the velocity update does not see, Δx − lag·Δv [J]: the contact placement's
-    term of the energy budget, for the nodes with flag 0 (a projectile contact candidate's is
-    booked by the kick that follows, with the projectile's placement); the largest placement
-    of a node along an axis [m])."""
+    (dissipation [J]: the kinetic energy the impulses took; the work of the yarn force at the
+    step's start (_yarn_force) over the displacement the velocity update does not see,
+    Δx − lag·Δv [J]: the contact placement's term of the energy budget, for the nodes with
+    flag 0 (a projectile contact candidate's is booked by the kick that follows, with the
+    projectile's placement); the largest placement of a node along an axis [m]).
+
+    The yarn force only: the electric field's and gravity's work are booked from the kicks'
+    velocities, which see no placement (nodes._drift_block, _kick_block), and the magnetic
+    force does none; with them, a ply pressed onto the next by a field booked h²|qE|²/2m a
+    step twice (tests/test_plies.py)."""
+    nodes, law = phys.nodes, phys.contact
     qi, qx = law.ply_quantum[0], law.ply_quantum[1]
     inv_mass, mass = nodes.inv_mass, nodes.mass
     lost = 0.0
@@ -347,12 +371,13 @@ def _apply(nodes, law, x, v, f, acc, lag, lo, hi, flag):
                 and acc[1, 0, n] == 0 and acc[1, 1, n] == 0 and acc[1, 2, n] == 0):
             continue
         im = inv_mass[n]
+        fy = _yarn_force(phys, sin, nf, n)
         for c in range(3):
             dv = float(acc[0, c, n]) * qi * im
             dx = float(acc[1, c, n]) * qx * im
             lost -= mass[n] * (v[c, n] * dv + 0.5 * dv * dv)
             if flag[n] == 0:
-                work += f[c, n] * (dx - lag * dv)
+                work += fy[c] * (dx - lag * dv)
             moved = max(moved, abs(dx))
             v[c, n] += dv
             x[c, n] += dx
@@ -376,11 +401,13 @@ that balance it are tiny.)"""
 
 
 @njit(cache=True)
-def ply_contact(phys, x, v, f, work, lag, driven):
+def ply_contact(phys, sin, x, v, work, lag, driven):
     """Ply-to-ply contact of every pair of neighbouring plies at positions x and velocities v
-    (changed in place); work.ply_normals holds the plies' normals afterwards; f: the node
-    forces whose work the placement does, lag: the time over which the scheme's position
-    update sees a velocity change (energy bookkeeping: Δt/2 for central differences); driven:
+    (changed in place); work.ply_normals holds the plies' normals afterwards; sin: the state
+    at the step's start, whose yarn force does the placement's work (_apply), with the node
+    fields of the step's start in work.node_field; lag: the time over which the scheme's
+    position update sees a velocity change (energy bookkeeping: Δt/2 for central
+    differences); driven:
     nonzero for the nodes in contact with the projectile (State.contact[3] after its
     contact).
     Returns (dissipation [J], placement work [J]); (0, 0) for one ply.
@@ -425,9 +452,9 @@ def ply_contact(phys, x, v, f, work, lag, driven):
                   law_p)
             _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, law.ply_guess[1], shares, region[1],
                   law_p)
-            d_lost, d_placed, d_moved = _apply(nodes, law, x, v, f, acc, lag,
+            d_lost, d_placed, d_moved = _apply(phys, sin, x, v, acc, lag,
                                                nodes.ply_nodes[p], nodes.ply_nodes[p + 2],
-                                               work.flag)
+                                               work.flag, work.node_field)
             lost += d_lost
             placed += d_placed
             moved = max(moved, d_moved)

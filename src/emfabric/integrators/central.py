@@ -90,7 +90,7 @@ class CentralDifference(IntegratorBase):
                (_node_contact, (phys, a, a, work, 0))]
         plies, segs = self.switches
         if plies is not None:
-            out.append((ply_contact, (phys, a.x, a.v, a.f, work, 0.0, a.contact[3])))
+            out.append((ply_contact, (phys, a, a.x, a.v, work, 0.0, a.contact[3])))
         if segs is not None:
             out.append((segment_contact, (phys.nodes, phys.yarns, phys.body, phys.contact,
                                           a.body, 0, 0, a.x, a.v, work, 0.0)))
