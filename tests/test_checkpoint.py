@@ -217,9 +217,9 @@ def test_a_pack_resumes_bitwise(tmp_path, integrator):
 @pytest.mark.parametrize("name", builtin_names())
 def test_every_builtin_scenario_resumes_bitwise(tmp_path, name, integrator):
     """Every built-in scenario, with either scheme (coarse, the projectile touching the sheet at
-    the start, ~60 steps): stopped by Ctrl-C halfway through and resumed, it writes the history
-    and snapshots of the uninterrupted run, bit for bit. (Issue 22: both schemes run every
-    built-in scenario, checkpoint and resume bit for bit.)"""
+    the start, 12 µs: at least 8 steps): stopped by Ctrl-C halfway through and resumed, it
+    writes the history and snapshots of the uninterrupted run, bit for bit. (Issue 22: both
+    schemes run every built-in scenario, checkpoint and resume bit for bit.)"""
     base = load_scenario(name)
     # the FSP and the ogive need cells smaller than their nose (the φ-scheme's segment contact)
     n = 21 if base.projectile.shape in ("fsp", "ogive") else 11

@@ -407,9 +407,8 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
     at the step's start, whose yarn force does the placement's work (_apply), with the node
     fields of the step's start in work.node_field; lag: the time over which the scheme's
     position update sees a velocity change (energy bookkeeping: Δt/2 for central
-    differences); driven:
-    nonzero for the nodes in contact with the projectile (State.contact[3] after its
-    contact).
+    differences); driven: nonzero for the nodes in contact with the projectile
+    (State.contact[3] after its contact).
     Returns (dissipation [J], placement work [J]); (0, 0) for one ply.
 
     Gauss–Seidel over the pairs: each pair's impulses and placements are applied before the
