@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import pytest
 
 from emfabric.config.scenario import Scenario
@@ -24,6 +26,14 @@ def fabric_only(**dotted) -> Scenario:
     }
     base.update(dotted)
     return Scenario().replace(**base)
+
+
+def pytest_xdist_auto_num_workers(config):
+    """`-n auto` (pyproject's addopts, with `--dist loadfile`): one worker per core, at most
+    four. Every worker compiles the kernels its test files use until the shared kernel cache
+    holds them, so more workers than that compile the same kernels side by side for little
+    gain. A test file runs on one worker, so its module fixtures are computed once."""
+    return max(1, min(os.cpu_count() or 1, 4))
 
 
 @pytest.fixture
