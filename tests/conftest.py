@@ -28,9 +28,10 @@ def fabric_only(**dotted) -> Scenario:
     return Scenario().replace(**base)
 
 
+@pytest.hookimpl(optionalhook=True)  # a hook of pytest-xdist's: none without it
 def pytest_xdist_auto_num_workers(config):
-    """`-n auto` (pyproject's addopts, with `--dist loadfile`): one worker per core, at most
-    four. Every worker compiles the kernels its test files use until the shared kernel cache
+    """`-n auto` (the README's test command, with `--dist loadfile`): one worker per core, at
+    most four. Every worker compiles the kernels its test files use until the shared kernel cache
     holds them, so more workers than that compile the same kernels side by side for little
     gain. A test file runs on one worker, so its module fixtures are computed once."""
     return max(1, min(os.cpu_count() or 1, 4))
