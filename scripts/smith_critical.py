@@ -10,6 +10,7 @@ yarn breaks within `--time` of the impact.
     python scripts/smith_critical.py                        # driven node, spheres of 3 and 10 mm
     python scripts/smith_critical.py --radius 0.005 --friction 0
     python scripts/smith_critical.py --no-node --radius 0.003 --failure-strain 0.035
+    python scripts/smith_critical.py --radius --time 30e-6 --bulk-viscosity 0   # without it
 
 docs/theory.md §2.1 quotes its output.
 """
@@ -42,10 +43,12 @@ def smith_speed(eps: float) -> float:
     return math.sqrt(2.0 * u * ul * w - w * w)
 
 
-def struck_yarn(speed: float, eps_f: float, radius: float | None, friction: float | None):
+def struck_yarn(speed: float, eps_f: float, radius: float | None, friction: float | None,
+                viscosity: float | None = None):
     """(model, initial state) of the test yarn of brittle yarns with failure strain eps_f, struck
     at `speed` by the driven middle node (radius None) or by a 5 kg sphere of that radius
-    (friction: static and dynamic, None for the scenario's)."""
+    (friction: static and dynamic, None for the scenario's; viscosity: solver.bulk_viscosity,
+    None for the default)."""
     lin = RHO * math.pi * R**2
     ly = 2 * HY
     keys = {"fabric.rescale": False, "fabric.material.modulus_cv": 0.0, "field.B": [0, 0, 0],
@@ -53,6 +56,8 @@ def struck_yarn(speed: float, eps_f: float, radius: float | None, friction: floa
             "fabric.areal_density": lin * H * (3 * NX) / ((NX - 1) * H * ly),
             "fabric.yarn_radius": R, "fabric.material.youngs_modulus": E,
             "fabric.damage.law": "brittle", "fabric.damage.failure_strain": eps_f}
+    if viscosity is not None:
+        keys["solver.bulk_viscosity"] = viscosity
     if radius is None:
         keys["projectile.shape"] = "none"
     else:
@@ -72,10 +77,10 @@ def struck_yarn(speed: float, eps_f: float, radius: float | None, friction: floa
 
 
 def breaks(speed: float, eps_f: float, radius: float | None, friction: float | None,
-           until: float) -> bool:
+           until: float, viscosity: float | None = None) -> bool:
     """Whether a yarn breaks within `until` of the impact at `speed` (radius None: the driven
     node)."""
-    model, s = struck_yarn(speed, eps_f, radius, friction)
+    model, s = struck_yarn(speed, eps_f, radius, friction, viscosity)
     integ = make_integrator(model)
     s2 = s.copy()
     touched = None
@@ -91,15 +96,15 @@ def breaks(speed: float, eps_f: float, radius: float | None, friction: float | N
 
 
 def critical(eps_f: float, radius: float | None, friction: float | None, until: float,
-             tol: float) -> tuple[float, float]:
+             tol: float, viscosity: float | None = None) -> tuple[float, float]:
     """(lo, hi): the fraction of V_c that breaks no yarn, and the one that breaks one."""
     vc = smith_speed(eps_f)
     lo, hi = 0.5, 1.05
-    if not breaks(hi * vc, eps_f, radius, friction, until):
+    if not breaks(hi * vc, eps_f, radius, friction, until, viscosity):
         return hi, math.inf
     while hi - lo > tol:
         mid = 0.5 * (lo + hi)
-        if breaks(mid * vc, eps_f, radius, friction, until):
+        if breaks(mid * vc, eps_f, radius, friction, until, viscosity):
             hi = mid
         else:
             lo = mid
@@ -116,6 +121,9 @@ def main() -> None:
     ap.add_argument("--failure-strain", type=float, default=0.02, help="ε_f (default 0.02)")
     ap.add_argument("--time", type=float, default=10e-6,
                     help="how long after the first contact a yarn may break [s] (default 1e-5)")
+    ap.add_argument("--bulk-viscosity", type=float, default=None,
+                    help="solver.bulk_viscosity (default: the scenario's, 0.06 for these brittle "
+                         "yarns)")
     ap.add_argument("--tol", type=float, default=0.01,
                     help="bisection width, as a fraction of V_c (default 0.01)")
     args = ap.parse_args()
@@ -124,7 +132,8 @@ def main() -> None:
     print(f"ε_f = {args.failure_strain:g}: Smith's V_c = {vc:.1f} m/s (check: ε(V_c) = {eps:.6f})")
     cases: list[float | None] = ([] if args.no_node else [None]) + list(args.radius)
     for radius in cases:
-        lo, hi = critical(args.failure_strain, radius, args.friction, args.time, args.tol)
+        lo, hi = critical(args.failure_strain, radius, args.friction, args.time, args.tol,
+                          args.bulk_viscosity)
         what = "driven node" if radius is None else f"sphere r = {radius * 1e3:g} mm"
         if radius is not None and args.friction is not None:
             what += f", friction {args.friction:g}"

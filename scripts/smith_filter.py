@@ -28,9 +28,10 @@ CASES = [(None, None), (0.002, None), (0.005, None), (0.02, None), (0.003, 0.0),
 """(sphere radius [m] or None for the driven node, friction or None for the scenario's)."""
 
 
-def strains(speed: float, radius: float | None, friction: float | None, until: float = 10e-6):
+def strains(speed: float, radius: float | None, friction: float | None, until: float = 10e-6,
+            viscosity: float | None = None):
     """(times [s], strains (steps, segments) of the struck row, time of first contact [s])."""
-    model, s = S.struck_yarn(speed, 5.0, radius, friction)  # ε_f = 5: no failure
+    model, s = S.struck_yarn(speed, 5.0, radius, friction, viscosity)  # ε_f = 5: no failure
     integ = make_integrator(model)
     s2 = s.copy()
     a, b = model.yarns.ends[:, 0], model.yarns.ends[:, 1]
@@ -68,6 +69,9 @@ def main() -> None:
                          "frictionless spheres 3, 10 mm)")
     ap.add_argument("--ratios", type=float, nargs="*", default=[0.8, 0.9, 0.95, 1.02, 1.1],
                     help="impact speeds as fractions of V_c")
+    ap.add_argument("--bulk-viscosity", type=float, default=None,
+                    help="solver.bulk_viscosity (default: the scenario's, 0.06 for these brittle "
+                         "yarns; docs/theory.md's table: 0)")
     args = ap.parse_args()
     vc = S.smith_speed(EPS_F)
     hc = S.H / math.sqrt(S.E / S.RHO)
@@ -79,7 +83,7 @@ def main() -> None:
                 + (", frictionless" if friction == 0.0 else ""))
         print(f"== {what}")
         for ratio in args.ratios:
-            ts, eps, t0 = strains(ratio * vc, radius, friction)
+            ts, eps, t0 = strains(ratio * vc, radius, friction, viscosity=args.bulk_viscosity)
             smith = brentq(lambda e, r=ratio: S.smith_speed(e) - r * vc, 1e-9, 0.5)
             pad = np.pad(eps, ((0, 0), (1, 1)), mode="edge")
             mean3 = ((pad[:, :-2] + pad[:, 1:-1] + pad[:, 2:]) / 3.0).max(axis=1)

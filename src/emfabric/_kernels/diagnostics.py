@@ -60,6 +60,7 @@ from emfabric._kernels.records import (
     ENERGY_DAMAGE,
     ENERGY_FRICTION,
     ENERGY_PROJECTION,
+    ENERGY_VISCOUS,
     ENERGY_WORK_FIELD,
     ENERGY_WORK_GRAVITY,
     ROW_COUNT,
@@ -224,7 +225,7 @@ def _total_energy(ke_t, ke_r, diag, energy):
     terms of energy in the order of records.ENERGY_TERMS)."""
     return (ke_t + ke_r + diag[KE] + diag[STRAIN] + energy[ENERGY_FRICTION]
             + energy[ENERGY_CONTACT] + energy[ENERGY_PROJECTION] + energy[ENERGY_DAMAGE]
-            - energy[ENERGY_WORK_FIELD] - energy[ENERGY_WORK_GRAVITY])
+            + energy[ENERGY_VISCOUS] - energy[ENERGY_WORK_FIELD] - energy[ENERGY_WORK_GRAVITY])
 
 
 @njit(cache=True)

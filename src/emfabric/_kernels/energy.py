@@ -39,7 +39,7 @@ from emfabric._kernels.vec3 import cross, dot, mat_vec, vec
 @njit(cache=True)
 def step_energy(phys, sin, sout, nc, work, t0, phi, dt, out):
     """Add the field work, gravity work and dissipations of the accepted step from sin (at t0)
-    to sout (at t0 + Δt) to out (6,) [J] (the order of records.ENERGY_TERMS)."""
+    to sout (at t0 + Δt) to out [J] (the order of records.ENERGY_TERMS)."""
     nodes, yarns, mat, fld, body = phys.nodes, phys.yarns, phys.material, phys.field, phys.body
     mass, inv_mass, charge = nodes.mass, nodes.inv_mass, nodes.charge
     grav = fld.gravity

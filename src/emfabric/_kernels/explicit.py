@@ -29,7 +29,9 @@ and gravity work as h/2 f·v̄ of each kick, the impulses' J·(v̄_point − v̄
 work friction does against the slip is booked as friction (_friction_work), the rest as
 contact); the yarns' work is the trapezoid h/2 (f_n + f_{n+1})·v_{n+½} of their energy change,
 and their work over the placement as projection, so the balance error measures the scheme's
-own error, O(h²) per unit time.
+own error, O(h²) per unit time. The yarns' viscous force (solver.bulk_viscosity) is not
+conservative: its work is booked by the kicks as the field's is (h/2 f_v·v̄ each, with the
+State's fv for the first), as viscous dissipation.
 """
 
 import math
@@ -77,6 +79,7 @@ from emfabric._kernels.records import (
     ENERGY_DAMAGE,
     ENERGY_FRICTION,
     ENERGY_PROJECTION,
+    ENERGY_VISCOUS,
     ENERGY_WORK_FIELD,
     ENERGY_WORK_GRAVITY,
     SUM_MOTION,
@@ -85,6 +88,7 @@ from emfabric._kernels.records import (
     SUM_STIFFNESS,
     SUM_WORK_FIELD,
     SUM_WORK_GRAVITY,
+    SUM_WORK_VISCOUS,
 )
 from emfabric._kernels.shapes import (
     bounding_radius,
@@ -323,7 +327,8 @@ def _travel_from_rows(phys, sums, ny, b_state):
 @njit(cache=True, nogil=True)
 def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol, energy):
     """One central-difference step from sin (at t) to sout (at t + Δt): nodes, body, contact,
-    damage committed, the energy terms of the step added to energy (6,). sin is never written.
+    damage committed, the energy terms of the step added to energy (records.ENERGY_TERMS). sin
+    is never written.
     Exactly one of rowbuf (ROWBUF_ROWS, nx + 1: the serial force kernel) and threads (blocks,
     ROWBUF_ROWS, nx + 1: the threaded one) is an array, the other None (only the kernel in use
     is compiled); both give the same numbers. plies, segs: an array where the model is a pack
@@ -381,6 +386,8 @@ def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol
     ny = nodes.ny
     w_field = _sum_rows(sums[SUM_WORK_FIELD], ny)
     w_grav = _sum_rows(sums[SUM_WORK_GRAVITY], ny)
+    viscous = phys.yarns.damping.size > 0
+    w_visc = _sum_rows(sums[SUM_WORK_VISCOUS], ny) if viscous else 0.0
     for n in range(sout.contact.shape[1]):
         for c in range(4):
             sout.contact[c, n] = 0.0
@@ -484,6 +491,8 @@ def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol
     travel = _travel_from_rows(phys, sums, ny, b_out)
     w_field += _sum_rows(sums[SUM_WORK_FIELD], ny)
     w_grav += _sum_rows(sums[SUM_WORK_GRAVITY], ny)
+    if viscous:
+        w_visc += _sum_rows(sums[SUM_WORK_VISCOUS], ny)
     # the work of the node force over the displacement the kicks do not see: the kicks book
     # h/2 f·v̄ with the velocity before contact in the first and after it in the second, i.e. a
     # displacement h (v⁻ + v⁺)/2, while the node moved h v⁻ and then was placed: the difference
@@ -501,7 +510,8 @@ def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol
     energy[ENERGY_CONTACT] += d_cont + d_ply
     energy[ENERGY_PROJECTION] += d_proj + w_ply
     energy[ENERGY_DAMAGE] += d_dam
-    total = w_field + w_grav + d_cont + d_fric + d_proj + d_dam + size + d_ply + w_ply
+    energy[ENERGY_VISCOUS] -= w_visc
+    total = w_field + w_grav + d_cont + d_fric + d_proj + d_dam + size + d_ply + w_ply + w_visc
     for c in range(3):
         total += b_out[BODY_V, c] + b_out[BODY_W, c]
     stable = 2.0 / math.sqrt(worst) if worst > 0.0 else math.inf

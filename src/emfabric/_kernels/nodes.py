@@ -58,6 +58,7 @@ from emfabric._kernels.records import (
     SUM_STIFFNESS,
     SUM_WORK_FIELD,
     SUM_WORK_GRAVITY,
+    SUM_WORK_VISCOUS,
     RowArrays,
     RowRecords,
 )
@@ -125,7 +126,17 @@ ROW_INV_DENOM = 27
 """1/(1 + |u|²)."""
 ROW_DT_OVER_MASS = 28
 """Δt/m (0 for a clamped node)."""
-ROWBUF_ROWS = 29
+VISC = 29
+"""With VISCOUS: the viscous part of the tension vectors of ROW_WARP_TENSION, ROW_FILL_UP and
+ROW_FILL_DOWN is in the 3 rows VISC further on (padded as they are; the row after each, 32, 36
+and 40, is not theirs)."""
+ROW_VISC_RATE = 32
+"""With VISCOUS: the viscous tension per unit length of d of the segments being computed."""
+ROW_VISC_WORK = 36
+"""With VISCOUS: per-node work of the viscous force in a half kick."""
+ROW_VISC_FORCE = 40
+"""With VISCOUS: the viscous part of the row's node force (3 rows)."""
+ROWBUF_ROWS = 43
 RKW = ROW_WARP_TENSION + 3
 """The warp segments' tangent stiffness (padded as their tensions)."""
 ROW_SEGMENT_ENERGY = ROW_FORCE
@@ -137,6 +148,10 @@ energy, momentum, angular momentum), once the row's force is consumed."""
 
 ALPHA = 1
 """_tensions mode bit: write the trial damage α."""
+VISCOUS = 8
+"""_tensions and _row_force mode bit: add the axial viscous tension η·α·L̇ of a taut segment
+(records.Yarns.damping), with L̇ from the displacement since the step's start over Δt, and write
+its part of the tension vectors VISC rows on (and of the node force into ROW_VISC_FORCE)."""
 TANGENT = 2
 """_tensions mode bit: write each segment's axial tangent stiffness (the stable step's)."""
 STATS = 4
@@ -178,8 +193,7 @@ def _segment_stats(buf, s, coef, rest2, mat, count):
 
 
 @njit(cache=True)
-def _tensions(x, span, inv_rest2, rest2, alpha_c, alpha_t, damage_thr, coef, mat, buf, out,
-              mode):
+def _tensions(x, span, rest, alpha_c, alpha_t, damage_thr, coef, mat, buf, out, mode, visc):
     """Tension vectors of `count` segments into buf[r:r + 3, c:c + count], out = (r, c), and
     with mode & TANGENT their axial tangent stiffness α·stiffness·materials.tangent_factor
     into buf[r + 3, c:c + count]. Returns, with mode & STATS, the segments' share of the
@@ -187,7 +201,11 @@ def _tensions(x, span, inv_rest2, rest2, alpha_c, alpha_t, damage_thr, coef, mat
 
     span = (a, step, s, count): segment s + i joins node a + i to node a + i + step, at the
     positions x (3, N); the segment arrays (committed α, trial α written when mode & ALPHA,
-    damage thresholds U², stiffness) are whole; inv_rest2, rest2: their 1/L0² and L0².
+    damage thresholds U², stiffness) are whole; rest = (1/L0², L0²) of them.
+    visc = (damping, base, 1/Δt): with mode & VISCOUS a taut segment's tension gains
+    η·α·L̇ with L̇ = d·(d − d_base)/(|d| Δt) (the rate over the step from the positions base;
+    the total tension is kept ≥ 0: a yarn does not push), and that part of the tension vectors
+    goes VISC rows on.
 
     Every array is indexed directly, with unsigned indices (no views: Numba references and
     releases each view it makes, an atomic operation each, ~16 % of a step when this took row
@@ -195,6 +213,7 @@ def _tensions(x, span, inv_rest2, rest2, alpha_c, alpha_t, damage_thr, coef, mat
     views). Split into short loops over few arrays so that the compiler vectorises them.
     """
     a, step, s, count = span
+    inv_rest2, rest2 = rest
     r, col = out
     for i in range(count):
         u = uint64(i)
@@ -215,6 +234,22 @@ def _tensions(x, span, inv_rest2, rest2, alpha_c, alpha_t, damage_thr, coef, mat
     if mode & ALPHA:
         for i in range(count):
             alpha_t[uint64(s + i)] = buf[ROW_STRESS, uint64(i)]
+    viscous = mode & VISCOUS
+    if viscous:
+        damping, base, inv_dt = visc
+        for i in range(count):
+            u = uint64(i)
+            ka = uint64(a + i)
+            kb = uint64(a + step + i)
+            dx, dy, dz = buf[ROW_SEGMENT, u], buf[ROW_SEGMENT + 1, u], buf[ROW_SEGMENT + 2, u]
+            ddx = dx - (base[0, kb] - base[0, ka])
+            ddy = dy - (base[1, kb] - base[1, ka])
+            ddz = dz - (base[2, kb] - base[2, ka])
+            taut = buf[ROW_STRETCH_SQ, u] > 1.0
+            # η α (d·ḋ)/|d|²: the viscous tension η α L̇ per unit length of d
+            buf[ROW_VISC_RATE, u] = ((buf[ROW_STRESS, u] * damping[uint64(s + i)] * inv_dt
+                                      * (dx * ddx + dy * ddy + dz * ddz)
+                                      / (dx * dx + dy * dy + dz * dz)) if taut else 0.0)
     # the material's kind is dispatched outside each loop: left to the compiler, a large
     # enough function is not unswitched, and the vectorised loop then calls exp for every
     # segment of every law
@@ -246,6 +281,21 @@ def _tensions(x, span, inv_rest2, rest2, alpha_c, alpha_t, damage_thr, coef, mat
             u = uint64(i)
             buf[ROW_STRESS, u] = (buf[ROW_STRESS, u] * coef[uint64(s + i)]
                                   * ksv_stress(buf[ROW_STRETCH_SQ, u]))
+    if viscous:
+        # elastic + viscous, at least 0; the viscous part is what the sum adds to the elastic
+        for i in range(count):
+            u = uint64(i)
+            elastic = buf[ROW_STRESS, u]
+            total = max(elastic + buf[ROW_VISC_RATE, u], 0.0)
+            buf[ROW_VISC_RATE, u] = total - elastic
+            buf[ROW_STRESS, u] = total
+        rv = r + VISC
+        for i in range(count):
+            u = uint64(i)
+            o = uint64(col + i)
+            buf[rv, o] = buf[ROW_VISC_RATE, u] * buf[ROW_SEGMENT, u]
+            buf[rv + 1, o] = buf[ROW_VISC_RATE, u] * buf[ROW_SEGMENT + 1, u]
+            buf[rv + 2, o] = buf[ROW_VISC_RATE, u] * buf[ROW_SEGMENT + 2, u]
     for i in range(count):
         u = uint64(i)
         o = uint64(col + i)
@@ -256,36 +306,42 @@ def _tensions(x, span, inv_rest2, rest2, alpha_c, alpha_t, damage_thr, coef, mat
 
 
 @njit(cache=True)
-def _block_start(j0, phys, prev, sin, sout, work, buf, mode):
+def _block_start(j0, phys, prev, sin, sout, work, buf, mode, inv_dt):
     """Prepare a block's row buffer before its first row j0: zero the padding of the warp row
-    and set the fill tensions (with mode & TANGENT their stiffness) from the row below
-    (recomputed, writing no damage, so that blocks are independent; zero for the first row of
-    a ply). Returns the first buffer rows (fill up, fill down): ROW_FILL_UP, ROW_FILL_DOWN."""
+    and set the fill tensions (with mode & TANGENT their stiffness, with mode & VISCOUS their
+    viscous part at the rate since sin.x over 1/inv_dt) from the row below (recomputed, writing
+    no damage, so that blocks are independent; zero for the first row of a ply). Returns the
+    first buffer rows (fill up, fill down): ROW_FILL_UP, ROW_FILL_DOWN."""
     nodes, yarns, mat = phys.nodes, phys.yarns, phys.material
     rows = nodes.rows
     for c in range(4):
         buf[ROW_WARP_TENSION + c, 0] = 0.0
+    for c in range(3):
+        buf[ROW_WARP_TENSION + VISC + c, 0] = 0.0
     s = rows[j0 - 1, ROW_FILL] if j0 > 0 else -1
     if s >= 0:
         a = rows[j0 - 1, ROW_NODE]
         nx = rows[j0 - 1, ROW_COUNT]
-        _tensions(prev, (a, nx, s, nx), yarns.inv_rest2[s], 0.0, sin.alpha, sout.alpha,
+        _tensions(prev, (a, nx, s, nx), (yarns.inv_rest2[s], 0.0), sin.alpha, sout.alpha,
                   work.damage_thr, yarns.stiffness, mat, buf, (int64(ROW_FILL_DOWN), int64(0)),
-                  mode & TANGENT)
+                  mode & (TANGENT | VISCOUS), (yarns.damping, sin.x, inv_dt))
     else:
         buf[ROW_FILL_DOWN:ROW_FILL_DOWN + 4] = 0.0
+        buf[ROW_FILL_DOWN + VISC:ROW_FILL_DOWN + VISC + 3] = 0.0
     return ROW_FILL_UP, ROW_FILL_DOWN
 
 
 @njit(cache=True, inline="always")
-def _row_force(j, arr, mat, uni, sourced, grav, prev, buf, ru, rd, mode):
+def _row_force(j, arr, mat, uni, sourced, grav, prev, buf, ru, rd, mode, inv_dt):
     """The non-magnetic force of grid row j at the positions `prev` (and the step's end time:
     the field is uniform, or the node fields stored for it) into the row buffer's ROW_FORCE
     rows: yarn tensions (the warp segments of row j and the fill segments to row j + 1, into
     buffer rows ru; rows rd hold those from row j − 1), one difference per node and
     direction, plus the electric part of eq. 2.7 and gravity. Trial damage into
     arr.alpha_trial; with mode & TANGENT the segments' tangent stiffness into row 3 of the
-    warp rows, ru and rd. Returns, with mode & STATS, the fabric diagnostics' share of the
+    warp rows, ru and rd. With mode & VISCOUS the yarns' viscous tensions are part of the force
+    (_tensions, at the rate since arr.base over 1/inv_dt) and their share of it goes into
+    ROW_VISC_FORCE as well. Returns, with mode & STATS, the fabric diagnostics' share of the
     row's warp segments and of the fill segments to row j + 1 (_segment_stats, merged), else
     NO_STATS.
 
@@ -293,7 +349,9 @@ def _row_force(j, arr, mat, uni, sourced, grav, prev, buf, ru, rd, mode):
     differences (_kick_block) call it row by row, inlined, given arrays and numbers rather than
     Physics's records (_rotate_row says why): arr a records.RowArrays built once per block, the
     material, the field as fields.uniform_field gives it, gravity as a tuple."""
-    rows, mass, charge, inv_rest2, rest, coef, alpha_c, alpha_t, damage_thr, node_fields = arr
+    (rows, mass, charge, inv_rest2, rest, coef, alpha_c, alpha_t, damage_thr, node_fields,
+     damping, base) = arr
+    visc = (damping, base, inv_dt)
     # the row's nodes and first segments (records.Nodes.rows); rest lengths are uniform per
     # yarn family within a ply
     nb = rows[j, ROW_NODE]
@@ -303,19 +361,22 @@ def _row_force(j, arr, mat, uni, sourced, grav, prev, buf, ru, rd, mode):
     # padded warp rows: column i + 1 is the tension of segment (i, i + 1), zeros at both ends
     for c in range(4):
         buf[ROW_WARP_TENSION + c, nx] = 0.0
+    for c in range(3):
+        buf[ROW_WARP_TENSION + VISC + c, nx] = 0.0
     # (int64(): a constant in a tuple is typed as a literal, and each literal would compile
     # _tensions again)
-    sw = _tensions(prev, (nb, int64(1), sb, nx - 1), inv_rest2[sb], rest[sb] ** 2, alpha_c,
+    sw = _tensions(prev, (nb, int64(1), sb, nx - 1), (inv_rest2[sb], rest[sb] ** 2), alpha_c,
                    alpha_t, damage_thr, coef, mat, buf, (int64(ROW_WARP_TENSION), int64(1)),
-                   mode | ALPHA)
+                   mode | ALPHA, visc)
     sfl = NO_STATS
     if sf >= 0:
-        sfl = _tensions(prev, (nb, nx, sf, nx), inv_rest2[sf], rest[sf] ** 2, alpha_c,
-                        alpha_t, damage_thr, coef, mat, buf, (ru, int64(0)), mode | ALPHA)
+        sfl = _tensions(prev, (nb, nx, sf, nx), (inv_rest2[sf], rest[sf] ** 2), alpha_c,
+                        alpha_t, damage_thr, coef, mat, buf, (ru, int64(0)), mode | ALPHA, visc)
     else:
         # the ply's last row: no fill above it (the whole width, so that the first row of the
         # next ply finds no tension from below)
         buf[ru:ru + 4] = 0.0
+        buf[ru + VISC:ru + VISC + 3] = 0.0
     # the field at t1 where the node is now (the iterate). The uniform and half-space
     # fields: field_at in each loop that needs it (a compare and a select, cheaper than a
     # row of stores and loads: the stored variant made an evaluation ~7 % slower); a field
@@ -336,6 +397,15 @@ def _row_force(j, arr, mat, uni, sourced, grav, prev, buf, ru, rd, mode):
                                     (prev[0, k], prev[1, k], prev[2, k]))
             buf[rf, u] = (((buf[rw, u + uint64(1)] - buf[rw, u]) + (buf[rfu, u] - buf[rfd, u]))
                           + (mass[k] * g + charge[k] * fe[c]))
+    if mode & VISCOUS:
+        for c in range(3):
+            rw = ROW_WARP_TENSION + VISC + c
+            rfu = ru + VISC + c
+            rfd = rd + VISC + c
+            rv = ROW_VISC_FORCE + c
+            for i in range(nx):
+                u = uint64(i)
+                buf[rv, u] = (buf[rw, u + uint64(1)] - buf[rw, u]) + (buf[rfu, u] - buf[rfd, u])
     return (max(sw[0], sfl[0]), sw[1] + sfl[1], sw[2] + sfl[2], min(sw[3], sfl[3]))
 
 
@@ -348,17 +418,18 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
     grav = (fld.gravity[0], fld.gravity[1], fld.gravity[2])
     node_fields = work.node_field
     arr = RowArrays(nodes.rows, nodes.mass, nodes.charge, yarns.inv_rest2, yarns.rest_length,
-                    yarns.stiffness, sin.alpha, sout.alpha, work.damage_thr, node_fields)
+                    yarns.stiffness, sin.alpha, sout.alpha, work.damage_thr, node_fields,
+                    yarns.damping, sin.x)
     x0, v0, f0 = sin.x, sin.v, sin.f
     x1, v1, f1 = sout.x, sout.v, sout.f
     skip_err = work.flag
     err_num, err_den = work.err_num, work.err_den
     inv_mass, charge = nodes.inv_mass, nodes.charge
-    ru, rd = _block_start(j0, phys, prev, sin, sout, work, buf, 0)
+    ru, rd = _block_start(j0, phys, prev, sin, sout, work, buf, 0, 0.0)
     rf, ra, rr = ROW_FORCE, ROW_VEL_EXPLICIT, ROW_ROTATION
     # arrays indexed directly with unsigned indices, no row views (_tensions says why)
     for j in range(j0, j1):
-        _row_force(j, arr, mat, uni, sourced, grav, prev, buf, ru, rd, 0)
+        _row_force(j, arr, mat, uni, sourced, grav, prev, buf, ru, rd, 0, 0.0)
         nb = nodes.rows[j, ROW_NODE]
         nx = nodes.rows[j, ROW_COUNT]
         for i in range(nx):
@@ -605,7 +676,8 @@ def _drift_block(j0, j1, phys, sin, sout, work, t0, dt, buf):
     """Rows j0 ≤ j < j1 of the first half of a central-difference step (explicit.central_step):
     v⁻ = v + h/(2m) f (f without its magnetic part), v_{n+½} = v⁻ turned by B(x_n, t0) for h/2,
     x_{n+1} = x_n + h v_{n+½} (a clamped node stays), into sout.v and sout.x; each row's field
-    and gravity work of the half kick (h/2 f·v̄) into work.row_sums."""
+    and gravity work of the half kick (h/2 f·v̄) into work.row_sums, and with bulk viscosity
+    (sin.fv the viscous part of f) the viscous force's."""
     nodes, fld = phys.nodes, phys.field
     uni, sourced = uniform_field(fld)
     nf = work.node_field
@@ -613,7 +685,8 @@ def _drift_block(j0, j1, phys, sin, sout, work, t0, dt, buf):
     grav = (fld.gravity[0], fld.gravity[1], fld.gravity[2])
     half = 0.5 * dt
     inv_mass, mass, charge = nodes.inv_mass, nodes.mass, nodes.charge
-    x0, v0, f0, e0 = sin.x, sin.v, sin.f, sin.e
+    x0, v0, f0, e0, fv0 = sin.x, sin.v, sin.f, sin.e, sin.fv
+    viscous = phys.yarns.damping.size > 0
     x1, v1 = sout.x, sout.v
     vm = ROW_VEL_EXPLICIT
     # arrays indexed directly with unsigned indices, no row views (_tensions says why)
@@ -642,6 +715,15 @@ def _drift_block(j0, j1, phys, sin, sout, work, t0, dt, buf):
                                                          + grav[2] * bz)
         sums[SUM_WORK_FIELD, j] = _buf_total(buf, ROW_INV_DENOM, nx)
         sums[SUM_WORK_GRAVITY, j] = _buf_total(buf, ROW_DT_OVER_MASS, nx)
+        if viscous:
+            for i in range(nx):
+                u = uint64(i)
+                k = uint64(nb + i)
+                buf[ROW_VISC_WORK, u] = half * (
+                    (fv0[0, k] * (0.5 * (v0[0, k] + buf[vm, u]))
+                     + fv0[1, k] * (0.5 * (v0[1, k] + buf[vm + 1, u])))
+                    + fv0[2, k] * (0.5 * (v0[2, k] + buf[vm + 2, u])))
+            sums[SUM_WORK_VISCOUS, j] = _buf_total(buf, ROW_VISC_WORK, nx)
         _rotate_row(nb, nx, inv_mass, charge, uni, sourced, nf, x0, half, buf, (vm, 0), buf)
         for c in range(3):
             for i in range(nx):
@@ -668,7 +750,12 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
     uni, sourced = uniform_field(fld)
     nf = work.node_field
     arr = RowArrays(nodes.rows, nodes.mass, nodes.charge, yarns.inv_rest2, yarns.rest_length,
-                    yarns.stiffness, sin.alpha, sout.alpha, work.damage_thr, nf)
+                    yarns.stiffness, sin.alpha, sout.alpha, work.damage_thr, nf, yarns.damping,
+                    sin.x)
+    viscous = yarns.damping.size > 0
+    mode = TANGENT | STATS | (VISCOUS if viscous else 0)
+    inv_dt = 1.0 / dt if dt > 0.0 else 0.0
+    fvo = sout.fv
     sums = work.row_sums
     flag, xbuf, v_pre = work.flag, work.xbuf, work.v_pre
     grav = (fld.gravity[0], fld.gravity[1], fld.gravity[2])
@@ -678,14 +765,13 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
     frame = work.frame
     cx, cy, cz = frame[0, 0], frame[0, 1], frame[0, 2]
     dirx, diry, dirz = frame[1, 0], frame[1, 1], frame[1, 2]
-    ru, rd = _block_start(j0, phys, x1, sin, sout, work, buf, TANGENT)
+    ru, rd = _block_start(j0, phys, x1, sin, sout, work, buf, mode, inv_dt)
     inv_mass, mass, charge = nodes.inv_mass, nodes.mass, nodes.charge
     fo, eo = sout.f, sout.e
     rf = ROW_FORCE
     # arrays indexed directly with unsigned indices, no row views (_tensions says why)
     for j in range(j0, j1):
-        seg_stats = _row_force(j, arr, mat, uni, sourced, grav, x1, buf, ru, rd,
-                               TANGENT | STATS)
+        seg_stats = _row_force(j, arr, mat, uni, sourced, grav, x1, buf, ru, rd, mode, inv_dt)
         nb = nodes.rows[j, ROW_NODE]
         nx = nodes.rows[j, ROW_COUNT]
         # the Gershgorin bound: 2 Σ k_t/m over the node's four segments
@@ -735,9 +821,20 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
             eo[0, k] = ee[0]
             eo[1, k] = ee[1]
             eo[2, k] = ee[2]
+            if viscous:
+                # the viscous force's work in this half kick, and the force for the next one
+                fvx = buf[ROW_VISC_FORCE, u]
+                fvy = buf[ROW_VISC_FORCE + 1, u]
+                fvz = buf[ROW_VISC_FORCE + 2, u]
+                buf[ROW_VISC_WORK, u] = half * ((fvx * bx + fvy * by) + fvz * bz)
+                fvo[0, k] = fvx
+                fvo[1, k] = fvy
+                fvo[2, k] = fvz
         sums[SUM_WORK_FIELD, j] = _buf_total(buf, ROW_INV_DENOM, nx)
         sums[SUM_WORK_GRAVITY, j] = _buf_total(buf, ROW_DT_OVER_MASS, nx)
         sums[SUM_SPEED, j] = _buf_total(buf, ROW_VEL_EXPLICIT, nx)
+        if viscous:
+            sums[SUM_WORK_VISCOUS, j] = _buf_total(buf, ROW_VISC_WORK, nx)
         _node_stats(nb, nx, mass, x1, v1, zref, (cx, cy, cz, dirx, diry, dirz), buf, sums, j)
         sums[SUM_DIAG + DIAG_STRETCH, j] = seg_stats[0]
         sums[SUM_DIAG + DIAG_STRAIN, j] = seg_stats[1]

@@ -32,11 +32,11 @@ force and moment at the state's time, rotation matrix (three rows)."""
 BODY_ROWS = 8
 
 ENERGY_TERMS = ("work_field", "work_gravity", "dissipation_friction", "dissipation_contact",
-                "dissipation_projection", "dissipation_damage")
+                "dissipation_projection", "dissipation_damage", "dissipation_viscous")
 """The cumulative energy terms [J] of a State (State.energy) in their order: the only place it is
 spelled; the kernels index them by the constants below."""
 (ENERGY_WORK_FIELD, ENERGY_WORK_GRAVITY, ENERGY_FRICTION, ENERGY_CONTACT, ENERGY_PROJECTION,
- ENERGY_DAMAGE) = range(len(ENERGY_TERMS))
+ ENERGY_DAMAGE, ENERGY_VISCOUS) = range(len(ENERGY_TERMS))
 
 HISTORY_VARIABLES = (
     ("dt", 1), ("iterations", 1), ("error", 1), ("rejected_steps", 1), ("force_evaluations", 1),
@@ -155,6 +155,11 @@ class Yarns(NamedTuple):
     failure_stretch2: np.ndarray = np.zeros(0)
     """Material.damage_law = DAMAGE_BRITTLE: each segment's stretch² at break, (1 + ε_f)²,
     (seg_count,); unused (may be empty) with DAMAGE_ZOHDI."""
+    damping: np.ndarray = np.zeros(0)
+    """The axial (bulk) viscosity of each segment, η = q·√(stiffness·m̄) with q
+    solver.bulk_viscosity and m̄ the mean mass of its end nodes [N s/m]: a taut segment carries
+    the tension η·α·L̇ besides its elastic one (central differences; docs/theory.md §2.1).
+    Empty: no viscosity (the kernels then leave it out)."""
 
 
 class Material(NamedTuple):
@@ -344,7 +349,7 @@ class RowRecords(NamedTuple):
 class RowArrays(NamedTuple):
     """The arrays the per-row force (nodes._row_force) reads, built once per row block: a
     function bound to a record references and releases every array in it (atomic operations),
-    so the per-row code gets these ten and not Physics's records (nodes._rotate_row)."""
+    so the per-row code gets these twelve and not Physics's records (nodes._rotate_row)."""
 
     rows: np.ndarray
     """Nodes.rows."""
@@ -363,6 +368,10 @@ class RowArrays(NamedTuple):
     """Work.damage_thr."""
     node_field: np.ndarray
     """Work.node_field."""
+    damping: np.ndarray
+    """Yarns.damping (empty: no viscosity)."""
+    base: np.ndarray
+    """The node positions at the step's start (the viscous tension's rate, (x − base)/Δt)."""
 
 
 class Physics(NamedTuple):
@@ -395,6 +404,9 @@ class StateArrays(NamedTuple):
     """Each node's contact at the state's time (central differences), (4, node_count): rows
     0–2 the body-frame point it sticks to [m], row 3 its mode (0 none, contact.STICK,
     contact.SLIDE)."""
+    fv: np.ndarray = np.zeros((3, 0))
+    """The viscous part of f (central differences with bulk viscosity: Yarns.damping), (3,
+    node_count), for the energy bookkeeping of the next half kick; (3, 0) without viscosity."""
 
 
 # the fabric diagnostics of a state (diagnostics.fabric_diagnostics), in this order: kinetic
@@ -430,7 +442,10 @@ SUM_MOTION = SUM_DIAG + DIAG_COUNT
 """Central differences: the row's largest |v|², then the smallest and the largest of each
 velocity component (7 rows; the no-tunnelling limit's, contact.travel_limit)."""
 MOTION_COUNT = 7
-SUM_ROWS = SUM_MOTION + MOTION_COUNT
+SUM_WORK_VISCOUS = SUM_MOTION + MOTION_COUNT
+"""Central differences with bulk viscosity: the work of the viscous yarn forces in the row's
+half kick (h/2 f_v·v̄)."""
+SUM_ROWS = SUM_WORK_VISCOUS + 1
 
 
 class Work(NamedTuple):

@@ -800,6 +800,12 @@ PHI_KEYS = ("scheme", "predictor", "phi", "tolerance", "target_iterations", "exp
 `integrator` runs the φ-scheme."""
 
 
+BULK_VISCOSITY = 0.06
+"""solver.bulk_viscosity where yarns break and it is not given (Abaqus/Explicit's and LS-DYNA's
+default linear bulk-viscosity coefficient): measured on Smith's struck yarn, docs/theory.md
+§2.1."""
+
+
 class SolverSpec(_Section):
     integrator: Literal["phi", "central-difference"] = "central-difference"
     """Time integration: "central-difference" (explicit, one force evaluation per step, Δt =
@@ -810,6 +816,14 @@ class SolverSpec(_Section):
     courant: Annotated[float, Field(gt=0.0, le=1.0)] = 0.25
     """central-difference: the fraction of the stable step (2/ω_max, ω_max² ≤ max 2Σk_t/m at the
     current stretches) taken [-]."""
+    bulk_viscosity: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
+    """central-difference: q of the yarns' linear bulk viscosity [-]: a taut segment carries,
+    besides its elastic tension, q·√(k m)·L̇ (k its axial stiffness 𝔼A0/L0, m the mass of its
+    nodes; the viscous part of the highest mode's damping ratio is q), which spreads a
+    loading wave front over a few segments instead of letting the lumped network ring behind
+    it (docs/theory.md §2.1). Not given: BULK_VISCOSITY (0.06, Abaqus/Explicit's and
+    LS-DYNA's default linear coefficient) where yarns break, fabric.damage.law = "brittle",
+    else 0 (the paper's model). The φ-scheme has none."""
     scheme: Literal["fixed-point", "anderson"] = "fixed-point"
     """Solver of each φ-step: the paper's fixed-point iteration, or its Anderson acceleration."""
     predictor: Literal["start", "explicit"] = "start"
@@ -906,6 +920,28 @@ class Scenario(_Section):
             solver = dict(solver) if isinstance(solver, dict) else {}
             data = {**data, "solver": {**solver, "integrator": "phi"}}
         return data
+
+    @model_validator(mode="after")
+    def _viscosity_is_central_only(self) -> Scenario:
+        if self.solver.integrator == "phi" and self.solver.bulk_viscosity:
+            raise ValueError(
+                f"solver.bulk_viscosity = {self.solver.bulk_viscosity} is an option of central "
+                "differences; the φ-scheme has no viscosity. Allowed: solver.integrator = "
+                "\"central-difference\" with it, or bulk_viscosity = 0 (or none) with the "
+                "φ-scheme")
+        return self
+
+    @property
+    def bulk_viscosity(self) -> float:
+        """The yarns' bulk viscosity q the run uses: solver.bulk_viscosity, or when not given
+        BULK_VISCOSITY for a central-difference run of yarns that break (damage.law =
+        "brittle"), else 0."""
+        q = self.solver.bulk_viscosity
+        if q is not None:
+            return float(q)
+        if self.solver.integrator == "central-difference" and self.fabric.damage.brittle:
+            return BULK_VISCOSITY
+        return 0.0
 
     @model_validator(mode="after")
     def _placement_is_phi_only(self) -> Scenario:

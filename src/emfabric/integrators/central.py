@@ -1,7 +1,8 @@
 """Central differences: explicit, one force evaluation per step (emfabric._kernels.explicit).
 
-Δt = min(courant × the stability limit of the current state, the no-tunnelling limit, dt_max,
-what is left to the end), recomputed every step: the limit 2/ω_max follows the yarns as they
+Δt = min(courant × the stability limit of the current state (× √(1 + q²) − q with the yarns'
+bulk viscosity q), the no-tunnelling limit, dt_max, what is left to the end), recomputed every
+step: the limit 2/ω_max follows the yarns as they
 stretch or break (explicit.stable_step), the no-tunnelling limit keeps the body from moving
 more than a quarter of its radius relative to the fabric per step (explicit.travel_step). A
 step whose body rotation does not converge or that leaves a free node inside the body is
@@ -56,6 +57,10 @@ class CentralDifference(IntegratorBase):
         super().__init__(model, threads=threads, adaptive=adaptive)
         opts = model.options
         self.courant = opts.courant
+        # the yarns' viscosity shortens the stable step: for damping ratio ξ of the highest
+        # mode 2/ω (√(1 + ξ²) − ξ); ξ ≤ q (builder._damping; less where yarns are stretched)
+        q = opts.bulk_viscosity
+        self.viscous_factor = math.sqrt(1.0 + q * q) - q
         self.dt_max = opts.dt_max
         self.dt_min = opts.dt_min
         self.work = make_work(model.node_count, model.ny, model.seg_count,
@@ -118,15 +123,17 @@ class CentralDifference(IntegratorBase):
             crit = self._stable(None, self.physics, state.node_x, state.seg_alpha, self.scratch)
         if travel is None:
             travel = self._travel(None, self.physics, state.node_x, state.node_v, state.body)
-        return min(self.courant * crit, travel, self.dt_max)
+        return min(self.courant * self.viscous_factor * crit, travel, self.dt_max)
 
     def _which_limit(self, state: State) -> str:
         """Which limit sets the step at this state, in words (for a step below dt_min)."""
         crit = self._stable(None, self.physics, state.node_x, state.seg_alpha, self.scratch)
         travel = self._travel(None, self.physics, state.node_x, state.node_v, state.body)
-        if self.courant * crit <= travel:
+        if self.courant * self.viscous_factor * crit <= travel:
             return (f"the stability limit 2/ω_max = {crit:.3g} s × courant {self.courant:g} "
-                    "(the stiffest yarn over the lightest node: check the material's modulus "
+                    + (f"× {self.viscous_factor:.3g} for the bulk viscosity "
+                       if self.viscous_factor < 1.0 else "")
+                    + "(the stiffest yarn over the lightest node: check the material's modulus "
                     "and the fabric's areal density)")
         return (f"the no-tunnelling limit {travel:.3g} s (the body may move a quarter of its "
                 "radius relative to the fastest node a step: check the speeds and the "

@@ -25,13 +25,14 @@ from emfabric.sim.model import Model
 from emfabric.sim.state import State
 
 CHECKPOINT = "checkpoint.nc"
-FORMAT = 3  # 2: the State holds node_e; 3: node_contact
+FORMAT = 4  # 2: the State holds node_e; 3: node_contact; 4: node_fv, dissipation_viscous
 _ADDED = {"contact_segments": 0}
-"""State fields added since format 3 was written, with the value a checkpoint without them
+"""State fields added since format 4 was written, with the value a checkpoint without them
 reads as (it describes the step that wrote the checkpoint, which the resumed run does not
 record again)."""
 _DIMS = {"node_x": ("xyz", "node"), "node_v": ("xyz", "node"), "node_f": ("xyz", "node"),
          "node_e": ("xyz", "node"), "node_contact": ("contact_row", "node"),
+         "node_fv": ("xyz", "viscous_node"),
          "seg_alpha": ("segment",), "body": ("body_row", "xyz"), "energy": ("energy_term",),
          "contact_force": ("xyz",)}
 
@@ -96,10 +97,7 @@ def read_checkpoint(path: Path) -> tuple[Scenario, str, State, RunPosition]:
             ds.load()
     except (OSError, ValueError) as err:
         raise CheckpointError(f"{path}: not a readable checkpoint ({err})") from None
-    if ds.attrs.get("checkpoint_format") == 2 and "node_contact" not in ds:
-        # a φ-scheme run of format 2: its nodes' contact record is all zeros
-        ds["node_contact"] = (("contact_row", "node"), np.zeros((4, ds.sizes["node"])))
-    elif ds.attrs.get("checkpoint_format") != FORMAT:
+    if ds.attrs.get("checkpoint_format") != FORMAT:
         raise CheckpointError(f"{path}: checkpoint format {ds.attrs.get('checkpoint_format')!r}"
                               f", this emfabric reads format {FORMAT}")
     try:

@@ -124,6 +124,17 @@ def build_model(scenario: Scenario, *, writes: bool = True) -> Model:
     return model
 
 
+def _damping(q: float, stiffness: np.ndarray, mass: np.ndarray,
+             ends: np.ndarray) -> np.ndarray:
+    """Yarns.damping: each segment's bulk viscosity η = q·√(k m̄) [N s/m], k its stiffness and
+    m̄ the mean mass of its end nodes (for a chain of equal nodes and segments the highest
+    mode's damping ratio is then q); empty for q = 0."""
+    if q == 0.0:
+        return np.zeros(0)
+    m = 0.5 * (mass[ends[:, 0]] + mass[ends[:, 1]])
+    return q * np.sqrt(stiffness * m)
+
+
 def _assemble(scenario: Scenario) -> Model:
     """The Model of a scenario, not yet checked."""
     fab = scenario.fabric
@@ -173,6 +184,7 @@ def _assemble(scenario: Scenario) -> Model:
             area=float(plies[0].area),
             ply_segments=ply_segments,
             failure_stretch2=seg_fail2,
+            damping=_damping(scenario.bulk_viscosity, seg_stiffness, node_mass, seg_nodes),
         ),
         material=Material(
             kind=MATERIAL_KSV if mat.model == "kirchhoff-saint-venant" else MATERIAL_FUNG,

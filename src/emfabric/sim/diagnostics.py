@@ -68,6 +68,8 @@ ATTRIBUTES: dict[str, tuple[str, str]] = {
                             "(cumulative)"),
     "dissipation_projection": ("J", "work lost in contact position projections (cumulative)"),
     "dissipation_damage": ("J", "energy released by yarn damage (cumulative)"),
+    "dissipation_viscous": ("J", "work of the yarns' bulk viscosity, solver.bulk_viscosity "
+                            "(cumulative)"),
     "energy_balance_error": ("J", "kinetic + strain + dissipated − work − initial energy"),
     "yaw": ("rad", "angle between the projectile's axis (nose marker) and its velocity"),
     "contact_force": ("N", "total contact + friction force on the projectile (mean over "

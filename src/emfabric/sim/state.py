@@ -55,6 +55,9 @@ class State:
     node_count): rows 0–2 the body-frame point it sticks to [m], row 3 its mode (0 none,
     contact.STICK, contact.SLIDE): a node that sticks is put where that material point has
     moved to in the next step."""
+    node_fv: np.ndarray = field(default_factory=lambda: np.zeros((3, 0)))
+    """The viscous part of node_f (central differences with solver.bulk_viscosity) [N], (3,
+    node_count): the next half kick books its work; (3, 0) without viscosity."""
     steps: int = 0
     """Accepted steps so far."""
     rejected: int = 0
@@ -86,7 +89,7 @@ class State:
     def arrays(self) -> StateArrays:
         """The arrays a step kernel reads or writes, as a named record."""
         return StateArrays(self.node_x, self.node_v, self.node_f, self.seg_alpha, self.body,
-                           self.node_e, self.node_contact)
+                           self.node_e, self.node_contact, self.node_fv)
 
     @property
     def body_x(self) -> np.ndarray:
@@ -136,6 +139,7 @@ def blank_state(model: Model) -> State:
         seg_alpha=np.ones(s),
         body=np.zeros((BODY_ROWS, 3)),
         node_contact=np.zeros((4, n)),
+        node_fv=np.zeros((3, n if m.physics.yarns.damping.size else 0)),
     )
     st.body[BODY_X] = m.body_x0
     st.body[BODY_V] = m.body_v0
@@ -158,9 +162,10 @@ def update_forces(model: Model, state: State) -> None:
     work.flag[:] = 0  # no contact candidates
     fill_node_fields(m.field, state.node_x, state.node_v, 0.0, state.t, work.node_field)
     start = StateArrays(state.node_x, state.node_v, np.zeros_like(state.node_f),
-                        state.seg_alpha, state.body, state.node_e)
+                        state.seg_alpha, state.body, state.node_e, state.node_contact,
+                        np.zeros_like(state.node_fv))
     out = StateArrays(scratch.node_x, scratch.node_v, state.node_f, scratch.seg_alpha,
-                      scratch.body, state.node_e)
+                      scratch.body, state.node_e, scratch.node_contact, state.node_fv)
     kick_rows(m.physics, start, out, work, state.t, 0.0, np.empty((ROWBUF_ROWS, m.nx + 1)))
     if m.has_body:
         b = state.body

@@ -367,7 +367,7 @@ def energy_figure(histories: Sequence[xr.Dataset] | xr.Dataset,
 
     Top: projectile kinetic (translation + rotation), fabric kinetic, strain, all dissipation,
     work of the field (and of gravity when any run has it). Middle: projectile rotation and
-    each dissipation (friction, contact, projection, damage). Bottom: the balance error
+    each dissipation (friction, contact, projection, damage, viscous). Bottom: the balance error
     (kinetic + strain + dissipated − work − initial energy). Several runs: colour per quantity,
     line style per run.
     """
@@ -389,6 +389,9 @@ def energy_figure(histories: Sequence[xr.Dataset] | xr.Dataset,
         _Series("contact", lambda ds: ds["dissipation_contact"].values, "tab:gray"),
         _Series("projection", lambda ds: ds["dissipation_projection"].values, "tab:cyan"),
         _Series("damage", lambda ds: ds["dissipation_damage"].values, "tab:purple"),
+        _Series("viscous", lambda ds: (ds["dissipation_viscous"].values  # older histories: none
+                                       if "dissipation_viscous" in ds
+                                       else np.zeros(ds.sizes["time"])), "tab:olive"),
     ]
     error = _Series("balance error", lambda ds: ds["energy_balance_error"].values, "k")
     with matplotlib.rc_context(STYLE):
