@@ -289,20 +289,21 @@ def _tensions(x, span, rest, alpha_c, alpha_t, damage_thr, coef, mat, buf, out, 
             total = max(elastic + buf[ROW_VISC_RATE, u], 0.0)
             buf[ROW_VISC_RATE, u] = total - elastic
             buf[ROW_STRESS, u] = total
-        rv = r + VISC
-        for i in range(count):
-            u = uint64(i)
-            o = uint64(col + i)
-            buf[rv, o] = buf[ROW_VISC_RATE, u] * buf[ROW_SEGMENT, u]
-            buf[rv + 1, o] = buf[ROW_VISC_RATE, u] * buf[ROW_SEGMENT + 1, u]
-            buf[rv + 2, o] = buf[ROW_VISC_RATE, u] * buf[ROW_SEGMENT + 2, u]
+        _scaled_segments(buf, ROW_VISC_RATE, r + VISC, col, count)
+    _scaled_segments(buf, ROW_STRESS, r, col, count)
+    return stats
+
+
+@njit(cache=True, inline="always")
+def _scaled_segments(buf, scale, r, col, count):
+    """buf[r:r + 3, col:col + count] = buf[scale] × the segment vectors buf[ROW_SEGMENT:+3]
+    (_tensions' tension vectors, or their viscous part)."""
     for i in range(count):
         u = uint64(i)
         o = uint64(col + i)
-        buf[r, o] = buf[ROW_STRESS, u] * buf[ROW_SEGMENT, u]
-        buf[r + 1, o] = buf[ROW_STRESS, u] * buf[ROW_SEGMENT + 1, u]
-        buf[r + 2, o] = buf[ROW_STRESS, u] * buf[ROW_SEGMENT + 2, u]
-    return stats
+        buf[r, o] = buf[scale, u] * buf[ROW_SEGMENT, u]
+        buf[r + 1, o] = buf[scale, u] * buf[ROW_SEGMENT + 1, u]
+        buf[r + 2, o] = buf[scale, u] * buf[ROW_SEGMENT + 2, u]
 
 
 @njit(cache=True)

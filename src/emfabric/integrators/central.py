@@ -2,11 +2,11 @@
 
 Δt = min(courant × the stability limit of the current state (× √(1 + q²) − q with the yarns'
 bulk viscosity q), the no-tunnelling limit, dt_max, what is left to the end), recomputed every
-step: the limit 2/ω_max follows the yarns as they
-stretch or break (explicit.stable_step), the no-tunnelling limit keeps the body from moving
-more than a quarter of its radius relative to the fabric per step (explicit.travel_step). A
-step whose body rotation does not converge or that leaves a free node inside the body is
-retried at half the step; a non-finite step is a DivergenceError.
+step: the limit 2/ω_max follows the yarns as they stretch or break (explicit.stable_step), the
+no-tunnelling limit keeps the body from moving more than a quarter of its radius relative to
+the fabric per step (explicit.travel_step). A step whose body rotation does not converge or
+that leaves a free node inside the body is retried at half the step; a non-finite step is a
+DivergenceError.
 """
 
 from __future__ import annotations
