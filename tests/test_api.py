@@ -1,11 +1,13 @@
 """The public Python API: run a Scenario or a Model, the projectile's initial pose."""
 
 import dataclasses
+import re
 
 import numpy as np
 import pytest
 
 import emfabric
+from emfabric.config.scenario import load_scenario
 from emfabric.sim.geometry import initial_pose
 
 from conftest import make
@@ -113,3 +115,22 @@ def test_study_cases_run_on_the_threads_asked_for(monkeypatch):
         assert default_threads(Big()) == numba.config.NUMBA_NUM_THREADS
     finally:
         numba.set_num_threads(before)
+
+
+@pytest.mark.parametrize("threads", [0, -3, 1.7, "2", True])
+def test_threads_must_be_a_whole_number_of_at_least_one(threads, tmp_path):
+    """As the CLI's --threads: refused before anything is written, naming the value."""
+    sc = load_scenario("paper-field", {"fabric.nodes": [12, 12], "solver.end_time": 1e-7})
+    with pytest.raises(ValueError, match=rf"threads = {re.escape(repr(threads))}: allowed"):
+        emfabric.run(sc, tmp_path / "out", threads=threads)
+    assert not (tmp_path / "out").exists()
+
+
+def test_numpy_values_are_overrides_like_any_other():
+    """A seed from np.arange, nodes from an array: the same scenario as Python numbers."""
+    sc = load_scenario("paper-field", {"fabric.material.seed": np.int64(3),
+                                       "fabric.nodes": np.array([30, 30]),
+                                       "projectile.velocity": (0.0, np.float64(0.0), -250.0)})
+    assert sc == load_scenario("paper-field", {"fabric.material.seed": 3,
+                                               "fabric.nodes": [30, 30],
+                                               "projectile.velocity": [0.0, 0.0, -250.0]})

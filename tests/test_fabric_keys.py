@@ -140,3 +140,39 @@ def test_fsp_into_a_real_fabric_breaks_yarns_at_their_failure_strain():
     assert s["broken_yarns"] > 0
     assert 1.0452 * (1 - 1e-3) < s["max_stretch"] <= 1.0452
     assert s["charge_plausible"] is False and s["plausibility_warnings"]
+
+
+def test_datasheet_keys_without_a_style_give_the_yarns_mass_as_areal_density():
+    """Linear density and thread count without a style or an areal density: the areal density
+    is the straight yarns' mass, tex·1e-6 kg/m × 100 (ends + picks) m/m² (no crimp); written,
+    it is kept."""
+    sc = make(**{"fabric.material.name": "kevlar-29", "fabric.yarn_denier": 3000.0,
+                 "fabric.thread_count": [6.693, 6.693], "fabric.size": [0.1, 0.1]})
+    assert sc.fabric.areal_density == pytest.approx(3000 / 9 * 1e-6 * 100 * 2 * 6.693,
+                                                    rel=1e-12)
+    own = sc.replace(**{"fabric.areal_density": 0.5}).fabric
+    assert own.areal_density == 0.5
+
+
+def test_a_pack_of_library_plies_breaks_like_its_materials():
+    """Every ply names a library material (a style or a name) and the pack none: the brittle
+    law, as for one sheet of either; a ply of the paper's fabric among them keeps eq. 2.6."""
+    plies = [{"style": "km2-600d-plain"}, {"material": {"name": "dyneema-sk76"}}]
+    sc = make(**{"fabric.nodes": [11, 11], "fabric.plies": 2, "fabric.ply": plies})
+    assert sc.fabric.damage.law == "brittle"
+    fail = np.sqrt(build_model(sc).yarns.failure_stretch2) - 1.0
+    # KM2 4.52 %, SK76 3.8 % (docs/materials.md): each ply breaks at its own
+    assert sorted(set(np.round(fail[fail > 0], 6))) == pytest.approx([0.038, 0.0452])
+    mixed = make(**{"fabric.nodes": [11, 11], "fabric.plies": 2,
+                    "fabric.ply": [{"style": "km2-600d-plain"}, {}]})
+    assert mixed.fabric.damage.law == "zohdi"
+
+
+@pytest.mark.parametrize("m", [1e-6, 0.005, 0.49])
+def test_a_weibull_shape_below_one_half_is_refused_naming_it(m):
+    """Γ(1 + 1/m) overflows below m ≈ 0.006 (it named solver.dt_min, the scenario's most
+    extreme value); any m below 0.5 scatters the strengths by more than 224 %."""
+    with pytest.raises(ScenarioError, match=rf"fabric\.damage\.weibull_shape = {m}: must be 0"):
+        make(**{"fabric.material.name": "kevlar-km2", "fabric.damage.weibull_shape": m})
+    assert make(**{"fabric.material.name": "kevlar-km2",
+                   "fabric.damage.weibull_shape": 0.5}).fabric.damage.weibull_shape == 0.5

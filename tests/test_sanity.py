@@ -29,6 +29,14 @@ from conftest import make
      "ply 2's areal density is 128 kg/m²"),
     # the speed scales as 1/√(areal density): 7714 m/s × √(0.12784/1e-300) on this sheet
     ({"fabric.areal_density": 1e-300}, "wave speed is 2.758e+153 m/s"),
+    # denier typed as tex: KM2's 600 denier is 66.7 tex; 600 tex × 2 × 13.39 per cm = 1.607
+    # kg/m² of straight yarns against the style's 0.18
+    ({"fabric.style": "km2-600d-plain", "fabric.yarn_linear_density": 600.0},
+     "is 0.112 × the mass of its straight yarns"),
+    ({"fabric.material.name": "kevlar-km2", "fabric.damage.failure_strain": 3.5},
+     "failure strain is 3.5 (350 %)"),
+    ({"fabric.material.name": "kevlar-km2", "fabric.material.tensile_strength": 3.88},
+     "did you type GPa as Pa?"),
 ])
 def test_typing_mistakes_are_warned_with_the_fix(overrides, expected, caplog):
     """Each mistake of the issue's new user runs (a warning, not an error) and says why and

@@ -69,6 +69,21 @@ def test_new_then_run_a_custom_file(tmp_path):
     assert tomllib.loads(shown)["fabric"]["nodes"] == [12, 12]
 
 
+def test_a_commented_file_follows_an_edited_material():
+    """`emfabric new km2-fsp`: what the style and the library supply is shown commented out,
+    so a file whose style is edited takes the new fabric's values (it pinned KM2's before);
+    bulk_viscosity shows the value this scenario takes."""
+    text = load_scenario("km2-fsp").to_commented_toml()
+    assert '\n# youngs_modulus = 84620000000.0  # (derived from the material' in text
+    assert "\n# bulk_viscosity = (not set: 0.06 in this scenario)" in text
+    edited = tomllib.loads(text.replace('style = "km2-600d-plain"',
+                                        'style = "sk76-1760dtex-plain"'))
+    fab = scenario_from_dict(edited).fabric
+    assert fab.material.name == "dyneema-sk76" and fab.material.density == 970.0
+    assert fab.areal_density == load_scenario(
+        "km2-fsp", {"fabric.style": "sk76-1760dtex-plain"}).fabric.areal_density
+
+
 @pytest.mark.parametrize("overrides,line", [
     ({"solver.phi": 1.5}, "solver.phi = 1.5: must be from 0 to 1"),
     ({"fabric.edges": "open"}, "fabric.edges = 'open': allowed: 'clamped', 'free'"),

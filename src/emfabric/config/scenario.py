@@ -69,6 +69,27 @@ def _fabric_style_name(v: str | None) -> str | None:
     return v
 
 
+def straight_yarn_mass(tex: float, thread_count: tuple[float, float]) -> float:
+    """The areal density of a weave's straight yarns [kg/m²]: tex [g/km] = 1e-6 kg/m, and
+    ends + picks per cm make 100 (ends + picks) m of yarn per m² (crimp adds to it)."""
+    return tex * 1e-6 * 100.0 * (thread_count[0] + thread_count[1])
+
+
+WEIBULL_SHAPE_MIN = 0.5
+"""The smallest Weibull modulus a scenario may give (besides 0, no scatter): m = 0.5 already
+scatters the failure strains by 224 % (coefficient of variation √(Γ(1 + 2/m)/Γ(1 + 1/m)² − 1)),
+and below about 0.006 the mean's normalisation Γ(1 + 1/m) overflows a double."""
+
+
+def _weibull_shape(v: float | None) -> float | None:
+    if v is not None and 0.0 < v < WEIBULL_SHAPE_MIN:
+        raise ValueError(f"must be 0 (no scatter) or at least {WEIBULL_SHAPE_MIN} (m = 0.5 "
+                         "already scatters the failure strains by 224 %)")
+    return v
+
+
+WeibullShape = Annotated[NonNegFloat, AfterValidator(_weibull_shape)]
+"""A Weibull modulus [-]: 0 (no scatter) or at least WEIBULL_SHAPE_MIN."""
 MaterialName = Annotated[str | None, AfterValidator(_library_material_name)]
 """A material of the library (emfabric.config.library), or None."""
 StyleName = Annotated[str | None, AfterValidator(_fabric_style_name)]
@@ -161,7 +182,7 @@ class Damage(_Section):
     failure_strain: PositiveFloat | None = None
     """law = "brittle": mean engineering strain at break of a segment at the reference spacing
     [-]; default fabric.material.failure_strain (the library's)."""
-    weibull_shape: NonNegFloat = 0.0
+    weibull_shape: WeibullShape = 0.0
     """law = "brittle": Weibull modulus m of the per-segment failure strain (0: no scatter, every
     segment breaks at failure_strain) [-]. Seeded by fabric.material.seed."""
 
@@ -176,7 +197,8 @@ class Fabric(_Section):
     size: tuple[PositiveFloat, PositiveFloat] = (0.254, 0.254)
     """Sheet size [m] along x and y."""
     areal_density: PositiveFloat = 0.12784
-    """[kg/m²]."""
+    """[kg/m²] (default the paper's; a style's; or, from yarn_linear_density and thread_count
+    without a style, the mass of the straight yarns, tex × (ends + picks): no crimp)."""
     yarn_radius: PositiveFloat = 0.000185
     """[m]; A0 = π r²."""
     charge_per_node: FiniteFloat = 1.0
@@ -244,6 +266,12 @@ class Fabric(_Section):
                     f"yarn_denier = {self.yarn_denier} and yarn_linear_density = "
                     f"{self.yarn_linear_density}: allowed: one of them (tex = denier/9)")
             object.__setattr__(self, "yarn_linear_density", self.yarn_denier / 9.0)
+        if (self.style is None and self.yarn_linear_density is not None
+                and self.thread_count is not None):
+            # a datasheet without a style and without an areal density: its straight yarns'
+            # mass, tex × (ends + picks) (no crimp: a written areal_density holds it)
+            _set_unset(self, {"areal_density": straight_yarn_mass(self.yarn_linear_density,
+                                                                  self.thread_count)})
         if self.yarn_linear_density is not None:
             rho = self.material.density
             if rho is None:
@@ -272,9 +300,13 @@ class Fabric(_Section):
             brittle_keys = dmg.failure_strain is not None or dmg.weibull_shape > 0.0
             zohdi_keys = any(getattr(dmg, k) != Damage.model_fields[k].default
                              for k in ("critical_stretch", "rate"))
+            # a library material: the pack's, or every ply's own (a style or a material name)
+            library = self.material.name is not None or (bool(self.ply) and all(
+                t.style is not None or (t.material is not None and t.material.name is not None)
+                for t in self.ply))
             law = ("brittle" if brittle_keys and not zohdi_keys else
                    "zohdi" if zohdi_keys and not brittle_keys else
-                   "brittle" if self.material.name is not None else "zohdi")
+                   "brittle" if library else "zohdi")
             written = dmg.model_dump(include=dmg.model_fields_set)
             damage = Damage.model_validate({**written, "law": law})
             object.__setattr__(damage, "__pydantic_fields_set__", set(dmg.model_fields_set))
@@ -294,7 +326,13 @@ class Fabric(_Section):
                             f"pack's law is {dmg.law!r} (one law per pack): allowed: "
                             "fabric.damage.law = 'brittle' with it, or leave it out")
         if dmg.brittle:
-            if dmg.failure_strain is None and self.material.failure_strain is None:
+            own = bool(self.ply) and all(  # every ply with a failure strain of its own
+                t.style is not None
+                or (t.material is not None and (t.material.name is not None
+                                                or t.material.failure_strain is not None))
+                or (t.damage is not None and t.damage.failure_strain is not None)
+                for t in self.ply)
+            if dmg.failure_strain is None and self.material.failure_strain is None and not own:
                 why = ("damage.law = 'brittle'" if "law" in dmg.model_fields_set else
                        f"damage.weibull_shape = {dmg.weibull_shape} chooses law = 'brittle', "
                        "which")
@@ -470,7 +508,7 @@ class _DamageOverride(_Section):
     """λ of eq. 2.6 [-] (must equal the pack's)."""
     failure_strain: PositiveFloat | None = None
     """law = "brittle": this ply's mean failure strain [-] (default its material's)."""
-    weibull_shape: NonNegFloat | None = None
+    weibull_shape: WeibullShape | None = None
     """law = "brittle": this ply's Weibull modulus [-]."""
 
 
@@ -1002,10 +1040,51 @@ def _comment(field: Any) -> str:
     return f"  # {text}" if text else ""
 
 
-def _section_lines(model: BaseModel, path: str, out: list[str]) -> None:
+DERIVED_FABRIC_KEYS = ("areal_density", "yarn_radius", "reference_nodes", "nodes",
+                       "thread_count", "yarn_linear_density", "plies")
+"""FabricSpec keys a style, a library material or datasheet keys supply where the scenario does
+not write them (apply_overrides derives them again; a commented file leaves them out)."""
+
+
+_FROM_LIBRARY = "derived from the material, style or datasheet keys: write it to fix it"
+
+
+def _derived_paths(scenario: Scenario) -> dict[str, str]:
+    """The dotted keys whose values the scenario did not write but took from its library
+    material, fabric style or datasheet keys, or from the other keys written (what
+    apply_overrides derives again), each with why: written out as values, they would pin the
+    old material's numbers after its name or style is edited."""
+    fab = scenario.fabric
+    mat = fab.material
+    out: dict[str, str] = {}
+    if "law" not in fab.damage.model_fields_set:
+        out["fabric.damage.law"] = ("chosen from the keys written and the material: write it "
+                                    "to fix it")
+    if fab.style is None and mat.name is None and not (
+            {"yarn_linear_density", "yarn_denier", "thread_count"} & fab.model_fields_set):
+        return out
+    out.update({f"fabric.{k}": _FROM_LIBRARY for k in DERIVED_FABRIC_KEYS
+                if k not in fab.model_fields_set})
+    out.update({f"fabric.material.{k}": _FROM_LIBRARY for k in (*LIBRARY_KEYS, "name")
+                if k not in mat.model_fields_set})
+    return out
+
+
+def _section_lines(model: BaseModel, path: str, out: list[str],
+                   derived: dict[str, str] | None = None,
+                   effective: dict[str, Any] | None = None) -> None:
     subs = []
     for name, field in type(model).model_fields.items():
         value = getattr(model, name)
+        why = (derived or {}).get(f"{path}{name}")
+        if why is not None and value is not None and not isinstance(value, BaseModel):
+            # what the material, style, datasheet or other keys give: shown, not pinned
+            out.append(f"# {name} = {_toml_value(value)}  # ({why}){_comment(field)[3:]}")
+            continue
+        if value is None and effective and f"{path}{name}" in effective:
+            out.append(f"# {name} = (not set: {_toml_value(effective[path + name])} in this "
+                       f"scenario){_comment(field)}")
+            continue
         if isinstance(value, BaseModel):
             subs.append((name, value))
         elif isinstance(value, tuple) and value and isinstance(value[0], BaseModel):
@@ -1023,12 +1102,14 @@ def _section_lines(model: BaseModel, path: str, out: list[str]) -> None:
                 _section_lines(item, f"{path}{name}.", out)
         else:
             out += ["", f"[{path}{name}]"]
-            _section_lines(value, f"{path}{name}.", out)
+            _section_lines(value, f"{path}{name}.", out, derived, effective)
 
 
 def _commented(scenario: Scenario) -> str:
     out: list[str] = []
-    _section_lines(scenario, "", out)
+    # keys whose default depends on the rest of the scenario: the value it takes here
+    effective = {"solver.bulk_viscosity": scenario.bulk_viscosity}
+    _section_lines(scenario, "", out, _derived_paths(scenario), effective)
     return "\n".join(out).lstrip("\n") + "\n"
 
 
@@ -1740,6 +1821,8 @@ def parse_override(text: str) -> tuple[str, Any]:
         raise ScenarioError(f"override {text!r} must look like section.key=value")
     key, raw = text.split("=", 1)
     key, raw = key.strip(), raw.strip()
+    if not key or any(not part.strip() for part in key.split(".")):
+        raise ScenarioError(f"override {text!r} must look like section.key=value")
     try:
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
@@ -1752,6 +1835,18 @@ def parse_override(text: str) -> tuple[str, Any]:
     except RecursionError:
         raise ScenarioError(f"override {key!r}: value nested too deeply") from None
     return key, value
+
+
+def _plain(value: Any) -> Any:
+    """An override from Python as a scenario file would hold it: NumPy scalars and arrays
+    (a seed from np.arange, nodes from an array) as Python numbers and lists."""
+    if hasattr(value, "tolist") and type(value).__module__ == "numpy":
+        return value.tolist()
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    return value
 
 
 def apply_overrides(scenario: Scenario, overrides: dict[str, Any]) -> Scenario:
@@ -1774,8 +1869,7 @@ def apply_overrides(scenario: Scenario, overrides: dict[str, Any]) -> Scenario:
         # from the overridden scenario (only what the scenario wrote is kept)
         fab = scenario.fabric
         fd = data.setdefault("fabric", {})
-        for key in ("areal_density", "yarn_radius", "reference_nodes", "nodes", "thread_count",
-                    "yarn_linear_density", "plies"):  # plies: from ply tables or ply_angles
+        for key in DERIVED_FABRIC_KEYS:  # plies: from ply tables or ply_angles
             if key not in fab.model_fields_set:
                 fd.pop(key, None)
         mat = fab.material
@@ -1784,6 +1878,7 @@ def apply_overrides(scenario: Scenario, overrides: dict[str, Any]) -> Scenario:
         if "law" not in fab.damage.model_fields_set:
             fd.get("damage", {}).pop("law", None)
     for key, value in overrides.items():
+        value = _plain(value)
         parts = key.split(".")
         node = data
         for i, part in enumerate(parts[:-1]):

@@ -14,6 +14,9 @@ body update are the kernels' (emfabric._kernels). May import: sim, _kernels (the
 settings come as model.options, never from the scenario).
 """
 
+import logging
+import operator
+
 from emfabric.integrators.base import DivergenceError, IntegratorBase, StepInfo
 from emfabric.integrators.central import CentralDifference
 from emfabric.integrators.phi import THREADS_FROM_NODES, Integrator, step_factor
@@ -33,12 +36,33 @@ def default_threads(model) -> int:
     return numba.get_num_threads() if model.node_count >= THREADS_FROM_NODES else 1
 
 
+def check_threads(threads) -> int | None:
+    """`threads` as given to a run (None: chosen for the problem's size), as an int: a whole
+    number ≥ 1 (a NumPy integer too); anything else is a ValueError naming it."""
+    if threads is None:
+        return None
+    try:
+        count = operator.index(threads)  # an int or NumPy integer, never a float or text
+    except TypeError:
+        count = 0
+    if isinstance(threads, bool) or count < 1:
+        raise ValueError(f"threads = {threads!r}: allowed: None (chosen for the problem's "
+                         "size) or a whole number ≥ 1")
+    return count
+
+
 def make_integrator(model, *, threads: int | None = None) -> IntegratorBase:
     """The integrator the model's options name ("phi" or "central-difference"), on `threads`
-    Numba threads (None: default_threads(model); 1: the serial kernel)."""
+    Numba threads (None: default_threads(model); 1: the serial kernel; more than Numba has:
+    as many as it has, said in the log)."""
     import numba
 
-    count = default_threads(model) if threads is None else max(1, int(threads))
+    threads = check_threads(threads)
+    count = default_threads(model) if threads is None else threads
+    if count > numba.config.NUMBA_NUM_THREADS:
+        logging.getLogger(__name__).warning(
+            "threads = %d: Numba has %d (NUMBA_NUM_THREADS, the cores it found): running on %d",
+            count, numba.config.NUMBA_NUM_THREADS, numba.config.NUMBA_NUM_THREADS)
     count = min(count, numba.config.NUMBA_NUM_THREADS)
     if count > 1:
         numba.set_num_threads(count)
@@ -50,4 +74,4 @@ def make_integrator(model, *, threads: int | None = None) -> IntegratorBase:
 
 
 __all__ = ["CentralDifference", "DivergenceError", "Integrator", "IntegratorBase", "StepInfo",
-           "default_threads", "make_integrator", "step_factor"]
+           "check_threads", "default_threads", "make_integrator", "step_factor"]

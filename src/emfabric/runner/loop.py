@@ -16,7 +16,7 @@ import xarray as xr
 
 from emfabric._kernels import cache_dir, cache_persistent, is_compiled, mark_compiled
 from emfabric.config.scenario import Scenario
-from emfabric.integrators import DivergenceError, StepInfo, make_integrator
+from emfabric.integrators import DivergenceError, StepInfo, check_threads, make_integrator
 from emfabric.io.checkpoint import (
     CHECKPOINT,
     CheckpointError,
@@ -104,6 +104,7 @@ def run(
     attached as `.result`. threads: Numba threads for the node kernels (1: the serial kernel;
     default: integrators.default_threads for the problem's size); the numbers are the same.
     """
+    check_threads(threads)  # before anything is built or written
     # a run kept in memory writes nothing: no output-volume limit (sim.sanity)
     model = scenario if isinstance(scenario, Model) else build_model(
         scenario, writes=out_dir is not None)
@@ -121,6 +122,7 @@ def resume(out_dir: str | Path, scenario: Scenario | None = None, *,
     """Continue the run whose checkpoint is in out_dir. The history it writes is bitwise the one
     an uninterrupted run writes. A scenario, if given, must equal the checkpoint's. The folder
     is held while the run goes (emfabric.io.lock: FolderInUse if another process holds it)."""
+    check_threads(threads)
     out = Path(out_dir)
     if not out.is_dir():
         read_checkpoint(out / CHECKPOINT)  # raises: no checkpoint, nothing to resume

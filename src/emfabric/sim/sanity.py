@@ -39,6 +39,16 @@ YARN_WAVE_SPEED = (10.0, 1e5)
 """Longitudinal wave speeds of the yarn network [m/s] we do not warn about (7.7 km/s on the
 paper's sheet; aramid and UHMWPE fibres 8–12 km/s)."""
 
+YARN_MASS_SHARE = (0.95, 1.5)
+"""Areal density over the mass of the straight yarns alone (linear density × thread count) we do
+not warn about: crimp adds a few to 25 % (the library's styles); lighter than its own yarns, or
+half again heavier, is a unit slip (denier as tex, ends per inch as per cm)."""
+FAILURE_STRAIN_MAX = 0.3
+"""Brittle failure strains [-] above this are warned about: fibres break at 0.5–10 % (a
+percentage typed as a fraction: 3.5 for 3.5 %)."""
+TENSILE_STRENGTH = (1e7, 1e11)
+"""Yarn tensile strengths [Pa] we do not warn about (aramid and UHMWPE 2.5–4 GPa)."""
+
 SNAPSHOT_BYTES_PER_NODE = 6 * 8
 """snapshots.nc per node and snapshot: position and velocity (6 doubles) [B]."""
 SNAPSHOT_BYTES_PER_SEGMENT = 8
@@ -96,6 +106,45 @@ def _fabric_warnings(model, from_scenario: bool) -> list[str]:
     return out
 
 
+def _datasheet_warnings(sc) -> list[str]:
+    """Each ply's areal density against the mass of its straight yarns (tex × ends and picks),
+    its brittle failure strain and its yarn strength, where a unit slip is likely
+    (YARN_MASS_SHARE, FAILURE_STRAIN_MAX, TENSILE_STRENGTH)."""
+    from emfabric.config.scenario import straight_yarn_mass
+
+    out: list[str] = []
+    fab = sc.fabric
+    plies = fab.plies
+    for p in range(plies):
+        ply = fab.ply_fabric(p) if fab.ply else fab
+        at = f"fabric.ply[{p}]." if fab.ply else "fabric."
+        which = f"ply {p + 1}" if plies > 1 else "the fabric"
+        tex, count = ply.yarn_linear_density, ply.thread_count
+        if tex is not None and count is not None:
+            yarns = straight_yarn_mass(tex, count)
+            share = ply.areal_density / yarns
+            lo, hi = YARN_MASS_SHARE
+            if not lo <= share <= hi:
+                out.append(
+                    f"{which}'s areal density {ply.areal_density:.4g} kg/m² is {share:.3g} × the "
+                    f"mass of its straight yarns ({tex:.4g} tex × {count[0]:.4g} + {count[1]:.4g} "
+                    f"per cm = {yarns:.4g} kg/m²; crimp adds a few to 25 %): check "
+                    f"{at}areal_density, yarn_linear_density (tex = denier/9) and thread_count "
+                    "(per cm, not per inch)")
+        eps = ply.failure_strain()
+        if eps is not None and eps > FAILURE_STRAIN_MAX:
+            out.append(f"{which}'s failure strain is {eps:g} ({100 * eps:g} %): fibres break at "
+                       f"0.5–10 %; strains are fractions (3.5 % is 0.035): check "
+                       f"{at}damage.failure_strain or {at}material.failure_strain")
+        sigma = ply.material.tensile_strength
+        lo_s, hi_s = TENSILE_STRENGTH
+        if sigma is not None and not lo_s <= sigma <= hi_s:
+            hint = "; did you type GPa as Pa? (3.88 GPa = 3.88e9 Pa)" if sigma < lo_s else ""
+            out.append(f"{at}material.tensile_strength = {sigma:g} Pa is far outside yarns "
+                       f"({lo_s:g}–{hi_s:g} Pa; aramid and UHMWPE 2.5–4 GPa){hint}")
+    return out
+
+
 def pre_run_warnings(model) -> list[str]:
     """What in this model is probably not what the user meant (see the module docstring)."""
     sc = model.scenario
@@ -114,6 +163,8 @@ def pre_run_warnings(model) -> list[str]:
                            + (f"; {hint}" if hint else ""))
                 break
     out += _fabric_warnings(model, sc is not None)
+    if sc is not None:
+        out += _datasheet_warnings(sc)
     if not model.has_body:
         return out
     pr = sc.projectile if sc is not None else None
