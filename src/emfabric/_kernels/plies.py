@@ -125,7 +125,7 @@ def _dist2(x, a, b):
 
 
 @njit(cache=True)
-def _pass(phys, master, slave, sign, x, v, nrm, acc, guess, shares, box, penalty):
+def _pass(phys, master, slave, sign, x, v, nrm, acc, guess, shares, box, penalty, near, hot):
     """The nodes of ply `slave` against the surface of ply `master` (normals nrm of master's
     nodes, times sign to point towards slave): impulses and placements into acc (integers).
     guess: the reference-nearest master node of each node; shares: scratch, (2, box count):
@@ -133,6 +133,10 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, guess, shares, box, penalty
     velocities, driven): a stiffness > 0 takes the φ-scheme's penalty law instead
     (ply_forces): forces into acc[0], nothing into acc[1]; driven (node_count,) or empty:
     nonzero for the nodes the projectile drives (central differences: ply_contact).
+    near: each slave node's nearest master node, written where the walk finds it; hot: with
+    hot[0] ≠ 0, only the slave nodes in slave's grid box hot[1:5] (i_lo, i_hi, j_lo, j_hi), or
+    whose nearest master node (near) lies within one box (Contact.ply_box) plus one node of
+    master's grid box hot[5:9], are met: the nodes ply_contact's later sweeps revisit.
 
     A node at its reference height whose reference-nearest master node lies more than
     LEVEL_BOX outside master's region is skipped: every gap there is the plies' reference
@@ -154,16 +158,30 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, guess, shares, box, penalty
     stiff, phi_dt, v_start, driven = penalty
     forces = stiff > 0.0
     steered = driven.shape[0] > 0
-    for n in range(nodes.ply_nodes[slave], nodes.ply_nodes[slave + 1]):
+    s0 = nodes.ply_nodes[slave]
+    snx = nodes.rows[nodes.ply_rows[slave], ROW_COUNT]
+    only = hot[0] != 0
+    for n in range(s0, nodes.ply_nodes[slave + 1]):
         k = guess[n]
         if k < 0 or mass[n] == 0.0:
             continue
+        if only:
+            si = (n - s0) % snx
+            sj = (n - s0) // snx
+            kn = near[n] if near[n] >= 0 else k
+            ni = (kn - m0) % mnx
+            nj = (kn - m0) // mnx
+            if not ((hot[1] <= si <= hot[2] and hot[3] <= sj <= hot[4])
+                    or (hot[5] - bi - 1 <= ni <= hot[6] + bi + 1
+                        and hot[7] - bj - 1 <= nj <= hot[8] + bj + 1)):
+                continue
         ci = (k - m0) % mnx
         cj = (k - m0) // mnx
         # at its reference height over a level neighbourhood: no contact
         if x[2, n] == nodes.x0[2, n] and (
                 box[0] > box[1] or ci < box[0] - LEVEL_BOX or ci > box[1] + LEVEL_BOX
                 or cj < box[2] - LEVEL_BOX or cj > box[3] + LEVEL_BOX):
+            near[n] = k
             continue
         # walk over master's grid to its node nearest to n
         best = _dist2(x, n, k)
@@ -182,6 +200,7 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, guess, shares, box, penalty
             if ni == ci and nj == cj:
                 break
             ci, cj = ni, nj
+        near[n] = m0 + cj * mnx + ci
         # the shares w of the master nodes around it, and their sum in mirror-paired order
         total = 0.0
         acting = False
@@ -282,11 +301,11 @@ def _shares_buffer(law, plies):
 
 
 @njit(cache=True)
-def _all_pairs(phys, x, v, nrm, acc, phi_dt, v_start):
+def _all_pairs(phys, x, v, nrm, acc, phi_dt, v_start, near):
     """Every ply's region and normals (into nrm), then both passes of every pair of neighbouring
     plies (ply p + 1's nodes against ply p's underside, then ply p's against ply p + 1) into
     acc: the φ-scheme's forces (stiffness Contact.ply_stiffness, φΔt = phi_dt, friction from
-    v_start), all from the one state x, v."""
+    v_start), all from the one state x, v; near: scratch (node_count,) int64."""
     nodes, law = phys.nodes, phys.contact
     plies = nodes.ply_nodes.shape[0] - 1
     shares = _shares_buffer(law, plies)
@@ -294,12 +313,13 @@ def _all_pairs(phys, x, v, nrm, acc, phi_dt, v_start):
     for p in range(plies):
         _region(nodes, p, x, region[p])
         _normals(nodes, p, x, nrm, region[p])
+    every = np.zeros(9, dtype=np.int64)
     for p in range(plies - 1):
         law_p = (law.ply_stiffness[p], phi_dt, v_start, np.empty(0))
         _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, law.ply_guess[0], shares, region[p],
-              law_p)
+              law_p, near, every)
         _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, law.ply_guess[1], shares, region[p + 1],
-              law_p)
+              law_p, near, every)
 
 
 @njit(cache=True)
@@ -314,7 +334,7 @@ def ply_forces(phys, x, v, v_start, work, out, phi_dt):
     if plies < 2:
         return 0
     acc = work.ply_acc
-    _all_pairs(phys, x, v, work.ply_normals, acc, phi_dt, v_start)
+    _all_pairs(phys, x, v, work.ply_normals, acc, phi_dt, v_start, work.ply_near[0])
     qf = law.ply_quantum[2]
     touched = 0
     for n in range(x.shape[1]):
@@ -348,13 +368,16 @@ def _yarn_force(phys, sin, nf, n):
 
 
 @njit(cache=True)
-def _apply(phys, sin, x, v, acc, lag, lo, hi, flag, nf):
+def _apply(phys, sin, x, v, acc, lag, lo, hi, flag, nf, hot, p, tol):
     """Apply the summed impulses and placements of nodes lo..hi − 1 (and clear them). Returns
     (dissipation [J]: the kinetic energy the impulses took; the work of the yarn force at the
     step's start (_yarn_force) over the displacement the velocity update does not see,
     Δx − lag·Δv [J]: the contact placement's term of the energy budget, for the nodes with
     flag 0 (a projectile contact candidate's is booked by the kick that follows, with the
-    projectile's placement); the largest placement of a node along an axis [m]).
+    projectile's placement); the largest placement of a node along an axis [m]). lo..hi − 1
+    are the nodes of plies p and p + 1; the grid box of each ply's nodes that changed by more
+    than tol — placed, or their velocity changed by Δv with 2·lag·|Δv| (the step's drift of it),
+    along an axis — is widened to hold them (hot, (plies, 4): i_lo, i_hi, j_lo, j_hi).
 
     The yarn force only: the electric field's and gravity's work are booked from the kicks'
     velocities, which see no placement (nodes._drift_block, _kick_block), and the magnetic
@@ -372,26 +395,42 @@ def _apply(phys, sin, x, v, acc, lag, lo, hi, flag, nf):
             continue
         im = inv_mass[n]
         fy = _yarn_force(phys, sin, nf, n)
+        mine = 0.0
+        change = 0.0
         for c in range(3):
             dv = float(acc[0, c, n]) * qi * im
             dx = float(acc[1, c, n]) * qx * im
             lost -= mass[n] * (v[c, n] * dv + 0.5 * dv * dv)
             if flag[n] == 0:
                 work += fy[c] * (dx - lag * dv)
-            moved = max(moved, abs(dx))
+            mine = max(mine, abs(dx))
+            change = max(change, abs(dx), 2.0 * lag * abs(dv))
             v[c, n] += dv
             x[c, n] += dx
             acc[0, c, n] = 0
             acc[1, c, n] = 0
+        moved = max(moved, mine)
+        if change > tol:
+            q = p if n < nodes.ply_nodes[p + 1] else p + 1
+            local = n - nodes.ply_nodes[q]
+            nx = nodes.rows[nodes.ply_rows[q], ROW_COUNT]
+            i = local % nx
+            j = local // nx
+            hot[q, 0] = min(hot[q, 0], i)
+            hot[q, 1] = max(hot[q, 1], i)
+            hot[q, 2] = min(hot[q, 2], j)
+            hot[q, 3] = max(hot[q, 3], j)
     return lost, work, moved
 
 
-PLY_SWEEPS = 8
+PLY_SWEEPS = 32
 """Central differences' ply contact: the most sweeps over the pack's pairs in one step (down,
-up, …). Where the plies fold sharply (the rim of a sphere on a 16-ply pack) nodes are passed
-back and forth by a few µm per sweep without end, and more sweeps only cost; with 4, the
-second gap of pack-fsp at 21 × 21 closed to zero at the default step
-(scripts/ply_gaps.py)."""
+up, …). Where the plies fold sharply (the rim of a sphere on a 16-ply pack, the FSP of
+pack-fsp) nodes are passed back and forth without end and the sweeps run to this limit, so
+it is a resolution: pack-fsp's ω_x at 12 µs with 8 / 16 / 32 / 64 sweeps was −3872 / −3775 /
+−3723 / −3692 rad/s (8 before the later sweeps met only the nodes that changed: 5 % from 64
+sweeps, now 0.8 % at about half the cost; docs/theory.md §5.1). With 4, the second gap of
+pack-fsp at 21 × 21 closed to zero at the default step (scripts/ply_gaps.py)."""
 PLY_TOLERANCE = 0.01
 """Central differences' ply contact sweeps until no node is placed by more than this fraction of
 the contact distance (Contact.ply_gap) along any axis in a sweep. (Not until no pair overlaps:
@@ -415,9 +454,14 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
     next pair is met, downwards through the pack (pair 1–2 first) and upwards on the next
     sweep, until a sweep places no node by more than PLY_TOLERANCE of the contact distance (at
     most PLY_SWEEPS sweeps; a pair that placed no node by more than that when it was last met,
-    nor did its neighbouring pairs, is not met again). A node the projectile drives acts as
-    one of infinite mass (_pass): the projectile put it on its surface, and the pack below is
-    placed against it.
+    nor did its neighbouring pairs, is not met again). The first sweep meets every node; the
+    later ones only the nodes near those that changed by more than the tolerance since their
+    pair was met (_apply's hot boxes, _pass): elsewhere a pass would give the same impulses
+    and placements within it. Under a projectile the sweeps rarely converge (a sharp fold), and
+    the first sweep costs what every sweep cost before: a pack's ply contact now costs about
+    as much with 32 sweeps as it did with 8 (docs/theory.md §5.1). A node the projectile
+    drives acts as one of infinite mass (_pass): the projectile put it on its surface, and the
+    pack below is placed against it.
     One simultaneous (Jacobi) pass per step with shared placements, before the projectile's
     contact, let the upper plies of an 8-ply pack under an FSP's flat face close their gaps
     (docs/theory.md §5.1). The order is fixed, so the numbers are the same for any thread
@@ -436,24 +480,47 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
     # the largest placement of each pair when it was last met: a pair whose own and whose
     # neighbours' last placements were all within the tolerance is not met again
     busy = np.full(plies - 1, math.inf)
+    # per ply, the grid box of its nodes placed by more than tol in the previous sweep (rows
+    # 0..plies − 1) and in this one (rows plies..): the later sweeps meet only the nodes near
+    # them (_pass's hot boxes)
+    hot = np.empty((2 * plies, 4), dtype=np.int64)
+    _clear_boxes(hot, 0, 2 * plies)
+    box = np.zeros(9, dtype=np.int64)
     for sweep in range(PLY_SWEEPS):
+        if sweep > 0:
+            for r in range(plies):
+                for c in range(4):
+                    hot[r, c] = hot[plies + r, c]
+            _clear_boxes(hot, plies, 2 * plies)
+        box[0] = 1 if sweep > 0 else 0
         moved = 0.0
         for q in range(plies - 1):
             p = q if sweep % 2 == 0 else plies - 2 - q
             near = max(busy[p], busy[max(p - 1, 0)], busy[min(p + 1, plies - 2)])
             if near <= tol:
                 continue
+            if sweep > 0:
+                # since this pair was met: what its plies' nodes were placed in the last
+                # sweep and so far in this one
+                lo = _hot_union(hot, plies, p, box, 5)
+                up = _hot_union(hot, plies, p + 1, box, 1)
+                if not (lo or up):
+                    busy[p] = 0.0
+                    continue
             for s in range(2):
                 _region(nodes, p + s, x, region[s])
                 _normals(nodes, p + s, x, nrm, region[s])
             law_p = (0.0, 0.0, v, driven)
             _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, law.ply_guess[0], shares, region[0],
-                  law_p)
+                  law_p, work.ply_near[0], box)
+            if sweep > 0:  # the other way round: ply p is the slave
+                for c in range(4):
+                    box[1 + c], box[5 + c] = box[5 + c], box[1 + c]
             _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, law.ply_guess[1], shares, region[1],
-                  law_p)
+                  law_p, work.ply_near[1], box)
             d_lost, d_placed, d_moved = _apply(phys, sin, x, v, acc, lag,
                                                nodes.ply_nodes[p], nodes.ply_nodes[p + 2],
-                                               work.flag, work.node_field)
+                                               work.flag, work.node_field, hot[plies:], p, tol)
             lost += d_lost
             placed += d_placed
             moved = max(moved, d_moved)
@@ -461,3 +528,29 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
         if moved <= tol:
             break
     return lost, placed
+
+
+_FAR = 1 << 62
+"""An empty hot box's lower bounds (_clear_boxes)."""
+
+
+@njit(cache=True)
+def _clear_boxes(hot, r0, r1):
+    """Rows r0..r1 − 1 of ply_contact's hot boxes: empty (i_lo > i_hi)."""
+    for r in range(r0, r1):
+        hot[r, 0] = _FAR
+        hot[r, 1] = -1
+        hot[r, 2] = _FAR
+        hot[r, 3] = -1
+
+
+@njit(cache=True)
+def _hot_union(hot, plies, ply, box, at):
+    """box[at:at + 4] = the union of ply `ply`'s hot boxes of the last sweep and this one
+    (ply_contact); returns whether it holds a node."""
+    a, b = hot[ply], hot[plies + ply]
+    box[at] = min(a[0], b[0])
+    box[at + 1] = max(a[1], b[1])
+    box[at + 2] = min(a[2], b[2])
+    box[at + 3] = max(a[3], b[3])
+    return box[at] <= box[at + 1]

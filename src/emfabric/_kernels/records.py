@@ -522,6 +522,10 @@ class Work(NamedTuple):
     """The same at the start of the step (the energy bookkeeping's), (3, node_count)."""
     ply_normals: np.ndarray
     """Every ply's surface normal at its nodes (plies._normals), (3, node_count)."""
+    ply_near: np.ndarray
+    """Central differences' ply contact: each node's nearest node of the ply below (row 0) and
+    above (row 1) as the step's first sweep found it (plies._pass), (2, node_count) int64;
+    (2, 1) for one ply."""
     frame: np.ndarray
     """The fabric diagnostics' frame, (2, 3): the body centre at the end of the step (zeros
     without a body) and the flight direction (set by the integrator)."""
@@ -577,4 +581,6 @@ def make_work(node_count: int, row_count: int, seg_total: int, seg_count: int = 
                 np.zeros(seg_total), np.full(seg_total, np.nan), np.zeros((7, 3)),
                 np.zeros((2, 3, n if plies > 1 else 1), dtype=np.int64),
                 np.zeros((3, n if plies > 1 else 1)), np.zeros((3, n if plies > 1 else 1)),
-                np.zeros((3, n if plies > 1 else 1)), np.zeros((2, 3)), np.zeros(DIAG_COUNT))
+                np.zeros((3, n if plies > 1 else 1)),
+                np.full((2, n if plies > 1 else 1), -1, dtype=np.int64), np.zeros((2, 3)),
+                np.zeros(DIAG_COUNT))
