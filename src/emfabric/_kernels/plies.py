@@ -427,10 +427,11 @@ PLY_SWEEPS = 32
 """Central differences' ply contact: the most sweeps over the pack's pairs in one step (down,
 up, …). Where the plies fold sharply (the rim of a sphere on a 16-ply pack, the FSP of
 pack-fsp) nodes are passed back and forth without end and the sweeps run to this limit, so
-it is a resolution: pack-fsp's ω_x at 12 µs with 8 / 16 / 32 / 64 sweeps was −3872 / −3775 /
-−3723 / −3692 rad/s (8 before the later sweeps met only the nodes that changed: 5 % from 64
-sweeps, now 0.8 % at about half the cost; docs/theory.md §5.1). With 4, the second gap of
-pack-fsp at 21 × 21 closed to zero at the default step (scripts/ply_gaps.py)."""
+it is a resolution: pack-fsp's ω_x at 12 µs with 8 / 16 / 32 / 64 sweeps is −3872 / −3775 /
+−3723 / −3692 rad/s. The limit was 8 (5 % from 64 sweeps); 32 is 0.8 %, and with the later
+sweeps meeting only the nodes that changed it costs about half what 8 sweeps of every node did
+(docs/theory.md §5.1). With 4, the second gap of pack-fsp at 21 × 21 closed to zero at the
+default step (scripts/ply_gaps.py)."""
 PLY_TOLERANCE = 0.01
 """Central differences' ply contact sweeps until no node is placed by more than this fraction of
 the contact distance (Contact.ply_gap) along any axis in a sweep. (Not until no pair overlaps:
@@ -480,9 +481,9 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
     # the largest placement of each pair when it was last met: a pair whose own and whose
     # neighbours' last placements were all within the tolerance is not met again
     busy = np.full(plies - 1, math.inf)
-    # per ply, the grid box of its nodes placed by more than tol in the previous sweep (rows
-    # 0..plies − 1) and in this one (rows plies..): the later sweeps meet only the nodes near
-    # them (_pass's hot boxes)
+    # per ply, the grid box of its nodes that changed by more than tol (_apply) in the previous
+    # sweep (rows 0..plies − 1) and in this one (rows plies..): the later sweeps meet only the
+    # nodes near them (_pass's hot boxes)
     hot = np.empty((2 * plies, 4), dtype=np.int64)
     _clear_boxes(hot, 0, 2 * plies)
     box = np.zeros(9, dtype=np.int64)
@@ -500,8 +501,8 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
             if near <= tol:
                 continue
             if sweep > 0:
-                # since this pair was met: what its plies' nodes were placed in the last
-                # sweep and so far in this one
+                # since this pair was met: where its plies' nodes changed in the last sweep
+                # and so far in this one
                 lo = _hot_union(hot, plies, p, box, 5)
                 up = _hot_union(hot, plies, p + 1, box, 1)
                 if not (lo or up):
