@@ -125,24 +125,27 @@ def _dist2(x, a, b):
 
 
 @njit(cache=True)
-def _pass(phys, master, slave, sign, x, v, nrm, acc, guess, shares, box, penalty, near, hot):
+def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, penalty):
     """The nodes of ply `slave` against the surface of ply `master` (normals nrm of master's
     nodes, times sign to point towards slave): impulses and placements into acc (integers).
-    guess: the reference-nearest master node of each node; shares: scratch, (2, box count):
-    each box node's w and gap; box: master's _region; penalty = (stiffness, φΔt, start-of-step
+    nearest = (guess, near): the reference-nearest master node of each node, and each node's
+    nearest master node, written where the walk finds it; shares: scratch, (2, box count):
+    each box node's w and gap; boxes = (box, hot): master's _region, and the nodes to meet
+    (below); penalty = (stiffness, φΔt, start-of-step
     velocities, driven): a stiffness > 0 takes the φ-scheme's penalty law instead
     (ply_forces): forces into acc[0], nothing into acc[1]; driven (node_count,) or empty:
     nonzero for the nodes the projectile drives (central differences: ply_contact).
-    near: each slave node's nearest master node, written where the walk finds it; hot: with
-    hot[0] ≠ 0, only the slave nodes in slave's grid box hot[1:5] (i_lo, i_hi, j_lo, j_hi), or
-    whose nearest master node (near) lies within one box (Contact.ply_box) plus one node of
-    master's grid box hot[5:9], are met: the nodes ply_contact's later sweeps revisit.
+    With hot[0] ≠ 0, only the slave nodes in slave's grid box hot[1:5] (i_lo, i_hi, j_lo,
+    j_hi), or whose nearest master node (near) lies within one box (Contact.ply_box) plus one
+    node of master's grid box hot[5:9], are met: the nodes ply_contact's later sweeps revisit.
 
     A node at its reference height whose reference-nearest master node lies more than
     LEVEL_BOX outside master's region is skipped: every gap there is the plies' reference
     distance, at least the contact distance (the transverse wave has not come). Only there
     does ply contact cost less than its full pass."""
     nodes, law = phys.nodes, phys.contact
+    guess, near = nearest
+    box, hot = boxes
     inv_mass, mass = nodes.inv_mass, nodes.mass
     m0 = nodes.ply_nodes[master]
     jm = nodes.ply_rows[master]
@@ -316,10 +319,10 @@ def _all_pairs(phys, x, v, nrm, acc, phi_dt, v_start, near):
     every = np.zeros(9, dtype=np.int64)
     for p in range(plies - 1):
         law_p = (law.ply_stiffness[p], phi_dt, v_start, np.empty(0))
-        _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, law.ply_guess[0], shares, region[p],
-              law_p, near, every)
-        _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, law.ply_guess[1], shares, region[p + 1],
-              law_p, near, every)
+        _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, (law.ply_guess[0], near), shares,
+              (region[p], every), law_p)
+        _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, (law.ply_guess[1], near), shares,
+              (region[p + 1], every), law_p)
 
 
 @njit(cache=True)
@@ -368,22 +371,25 @@ def _yarn_force(phys, sin, nf, n):
 
 
 @njit(cache=True)
-def _apply(phys, sin, x, v, acc, lag, lo, hi, flag, nf, hot, p, tol):
-    """Apply the summed impulses and placements of nodes lo..hi − 1 (and clear them). Returns
-    (dissipation [J]: the kinetic energy the impulses took; the work of the yarn force at the
-    step's start (_yarn_force) over the displacement the velocity update does not see,
-    Δx − lag·Δv [J]: the contact placement's term of the energy budget, for the nodes with
+def _apply(phys, sin, x, v, acc, lag, span, flag, nf, mark):
+    """Apply the summed impulses and placements of nodes lo..hi − 1, span = (lo, hi) (and clear
+    them). Returns (dissipation [J]: the kinetic energy the impulses took; the work of the yarn
+    force at the step's start (_yarn_force) over the displacement the velocity update does not
+    see, Δx − lag·Δv [J]: the contact placement's term of the energy budget, for the nodes with
     flag 0 (a projectile contact candidate's is booked by the kick that follows, with the
-    projectile's placement); the largest placement of a node along an axis [m]). lo..hi − 1
-    are the nodes of plies p and p + 1; the grid box of each ply's nodes that changed by more
-    than tol — placed, or their velocity changed by Δv with 2·lag·|Δv| (the step's drift of it),
-    along an axis — is widened to hold them (hot, (plies, 4): i_lo, i_hi, j_lo, j_hi).
+    projectile's placement); the largest placement of a node along an axis [m]). lo..hi − 1 are
+    the nodes of plies p and p + 1, mark = (hot, p, tol): the grid box of each ply's nodes that
+    changed by more than tol — placed, or their velocity changed by Δv with 2·lag·|Δv| (the
+    step's drift of it), along an axis — is widened to hold them (hot, (plies, 4): i_lo, i_hi,
+    j_lo, j_hi).
 
     The yarn force only: the electric field's and gravity's work are booked from the kicks'
     velocities, which see no placement (nodes._drift_block, _kick_block), and the magnetic
     force does none; with them, a ply pressed onto the next by a field booked h²|qE|²/2m a
     step twice (tests/test_plies.py)."""
     nodes, law = phys.nodes, phys.contact
+    lo, hi = span
+    hot, p, tol = mark
     qi, qx = law.ply_quantum[0], law.ply_quantum[1]
     inv_mass, mass = nodes.inv_mass, nodes.mass
     lost = 0.0
@@ -512,16 +518,16 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
                 _region(nodes, p + s, x, region[s])
                 _normals(nodes, p + s, x, nrm, region[s])
             law_p = (0.0, 0.0, v, driven)
-            _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, law.ply_guess[0], shares, region[0],
-                  law_p, work.ply_near[0], box)
+            _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, (law.ply_guess[0], work.ply_near[0]),
+                  shares, (region[0], box), law_p)
             if sweep > 0:  # the other way round: ply p is the slave
                 for c in range(4):
                     box[1 + c], box[5 + c] = box[5 + c], box[1 + c]
-            _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, law.ply_guess[1], shares, region[1],
-                  law_p, work.ply_near[1], box)
+            _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, (law.ply_guess[1], work.ply_near[1]),
+                  shares, (region[1], box), law_p)
             d_lost, d_placed, d_moved = _apply(phys, sin, x, v, acc, lag,
-                                               nodes.ply_nodes[p], nodes.ply_nodes[p + 2],
-                                               work.flag, work.node_field, hot[plies:], p, tol)
+                                               (nodes.ply_nodes[p], nodes.ply_nodes[p + 2]),
+                                               work.flag, work.node_field, (hot[plies:], p, tol))
             lost += d_lost
             placed += d_placed
             moved = max(moved, d_moved)
