@@ -146,6 +146,9 @@ ROW_DIAG = ROW_SEGMENT
 """Central differences' kick: per-node terms of the fabric diagnostics' sums (7 rows: kinetic
 energy, momentum, angular momentum), once the row's force is consumed."""
 
+# brittle yarns failing on the averaged stretch: a segment whose Green strain passes this
+# multiple of its strain at break breaks at once (records.Yarns.averaging_rate)
+OVERSTRAIN = 1.25
 ALPHA = 1
 """_tensions mode bit: write the trial damage α."""
 VISCOUS = 8
@@ -193,15 +196,20 @@ def _segment_stats(buf, s, coef, rest2, mat, count):
 
 
 @njit(cache=True)
-def _tensions(x, span, rest, alpha_c, alpha_t, damage_thr, coef, mat, buf, out, mode, visc):
+def _tensions(x, span, rest, alpha, damage_thr, coef, mat, buf, out, mode, visc):
     """Tension vectors of `count` segments into buf[r:r + 3, c:c + count], out = (r, c), and
     with mode & TANGENT their axial tangent stiffness α·stiffness·materials.tangent_factor
     into buf[r + 3, c:c + count]. Returns, with mode & STATS, the segments' share of the
     fabric diagnostics at the trial α (_segment_stats), else NO_STATS.
 
     span = (a, step, s, count): segment s + i joins node a + i to node a + i + step, at the
-    positions x (3, N); the segment arrays (committed α, trial α written when mode & ALPHA,
-    damage thresholds U², stiffness) are whole; rest = (1/L0², L0²) of them.
+    positions x (3, N); the segment arrays (damage thresholds U², stiffness) are whole; rest =
+    (1/L0², L0²) of them. alpha = (committed α, trial α written when mode & ALPHA, committed
+    averaged stretch², trial averaged stretch² written when mode & ALPHA, Yarns.averaging_rate,
+    Δt): where the averaged stretch² is kept (brittle yarns, fabric.damage.strain_averaging),
+    its trial is the backward-Euler update ū² + g max(U², 1) over 1 + g, g = Δt/τ (a slack
+    yarn counts as unstrained), and a segment breaks where that passes its threshold or where
+    its Green strain passes OVERSTRAIN times the threshold's; else where U² passes it.
     visc = (damping, base, 1/Δt): with mode & VISCOUS a taut segment's tension gains
     η·α·L̇ with L̇ = d·(d − d_base)/(|d| Δt) (the rate over the step from the positions base;
     the total tension is kept ≥ 0: a yarn does not push), and that part of the tension vectors
@@ -226,11 +234,29 @@ def _tensions(x, span, rest, alpha_c, alpha_t, damage_thr, coef, mat, buf, out, 
         u = uint64(i)
         buf[ROW_STRETCH_SQ, u] = stretch_sq(buf[ROW_SEGMENT, u], buf[ROW_SEGMENT + 1, u],
                                             buf[ROW_SEGMENT + 2, u], inv_rest2)
-    for i in range(count):
-        u = uint64(i)
-        k = uint64(s + i)
-        buf[ROW_STRESS, u] = damage_above(alpha_c[k], buf[ROW_STRETCH_SQ, u], damage_thr[k],
-                                          mat)
+    alpha_c, alpha_t, strain_c, strain_t, avg_rate, dt = alpha
+    if strain_c.shape[0] == 0:
+        for i in range(count):
+            u = uint64(i)
+            k = uint64(s + i)
+            buf[ROW_STRESS, u] = damage_above(alpha_c[k], buf[ROW_STRETCH_SQ, u],
+                                              damage_thr[k], mat)
+    else:
+        # brittle failure on the averaged stretch² (records.Yarns.averaging_rate); the trial
+        # average in ROW_VISC_RATE until it is stored (that row is written below, if at all)
+        for i in range(count):
+            u = uint64(i)
+            k = uint64(s + i)
+            g = dt * avg_rate[k]
+            u2 = buf[ROW_STRETCH_SQ, u]
+            thr = damage_thr[k]
+            avg = (strain_c[k] + g * max(u2, 1.0)) / (1.0 + g)
+            buf[ROW_VISC_RATE, u] = avg
+            over = avg > thr or u2 - 1.0 > OVERSTRAIN * (thr - 1.0)
+            buf[ROW_STRESS, u] = 0.0 if over else alpha_c[k]
+        if mode & ALPHA:
+            for i in range(count):
+                strain_t[uint64(s + i)] = buf[ROW_VISC_RATE, uint64(i)]
     if mode & ALPHA:
         for i in range(count):
             alpha_t[uint64(s + i)] = buf[ROW_STRESS, uint64(i)]
@@ -307,7 +333,7 @@ def _scaled_segments(buf, scale, r, col, count):
 
 
 @njit(cache=True)
-def _block_start(j0, phys, prev, sin, sout, work, buf, mode, inv_dt):
+def _block_start(j0, phys, prev, sin, sout, work, buf, mode, dt):
     """Prepare a block's row buffer before its first row j0: zero the padding of the warp row
     and set the fill tensions (with mode & TANGENT their stiffness, with mode & VISCOUS their
     viscous part at the rate since sin.x over 1/inv_dt) from the row below (recomputed, writing
@@ -315,6 +341,7 @@ def _block_start(j0, phys, prev, sin, sout, work, buf, mode, inv_dt):
     first buffer rows (fill up, fill down): ROW_FILL_UP, ROW_FILL_DOWN."""
     nodes, yarns, mat = phys.nodes, phys.yarns, phys.material
     rows = nodes.rows
+    inv_dt = 1.0 / dt if dt > 0.0 else 0.0
     for c in range(4):
         buf[ROW_WARP_TENSION + c, 0] = 0.0
     for c in range(3):
@@ -323,7 +350,8 @@ def _block_start(j0, phys, prev, sin, sout, work, buf, mode, inv_dt):
     if s >= 0:
         a = rows[j0 - 1, ROW_NODE]
         nx = rows[j0 - 1, ROW_COUNT]
-        _tensions(prev, (a, nx, s, nx), (yarns.inv_rest2[s], 0.0), sin.alpha, sout.alpha,
+        _tensions(prev, (a, nx, s, nx), (yarns.inv_rest2[s], 0.0),
+                  (sin.alpha, sout.alpha, sin.strain, sout.strain, yarns.averaging_rate, dt),
                   work.damage_thr, yarns.stiffness, mat, buf, (int64(ROW_FILL_DOWN), int64(0)),
                   mode & (TANGENT | VISCOUS), (yarns.damping, sin.x, inv_dt))
     else:
@@ -351,8 +379,9 @@ def _row_force(j, arr, mat, uni, sourced, grav, prev, buf, ru, rd, mode, inv_dt)
     Physics's records (_rotate_row says why): arr a records.RowArrays built once per block, the
     material, the field as fields.uniform_field gives it, gravity as a tuple."""
     (rows, mass, charge, inv_rest2, rest, coef, alpha_c, alpha_t, damage_thr, node_fields,
-     damping, base) = arr
+     damping, base, strain_c, strain_t, avg_rate, dt) = arr
     visc = (damping, base, inv_dt)
+    alpha = (alpha_c, alpha_t, strain_c, strain_t, avg_rate, dt)
     # the row's nodes and first segments (records.Nodes.rows); rest lengths are uniform per
     # yarn family within a ply
     nb = rows[j, ROW_NODE]
@@ -366,13 +395,13 @@ def _row_force(j, arr, mat, uni, sourced, grav, prev, buf, ru, rd, mode, inv_dt)
         buf[ROW_WARP_TENSION + VISC + c, nx] = 0.0
     # (int64(): a constant in a tuple is typed as a literal, and each literal would compile
     # _tensions again)
-    sw = _tensions(prev, (nb, int64(1), sb, nx - 1), (inv_rest2[sb], rest[sb] ** 2), alpha_c,
-                   alpha_t, damage_thr, coef, mat, buf, (int64(ROW_WARP_TENSION), int64(1)),
+    sw = _tensions(prev, (nb, int64(1), sb, nx - 1), (inv_rest2[sb], rest[sb] ** 2), alpha,
+                   damage_thr, coef, mat, buf, (int64(ROW_WARP_TENSION), int64(1)),
                    mode | ALPHA, visc)
     sfl = NO_STATS
     if sf >= 0:
-        sfl = _tensions(prev, (nb, nx, sf, nx), (inv_rest2[sf], rest[sf] ** 2), alpha_c,
-                        alpha_t, damage_thr, coef, mat, buf, (ru, int64(0)), mode | ALPHA, visc)
+        sfl = _tensions(prev, (nb, nx, sf, nx), (inv_rest2[sf], rest[sf] ** 2), alpha,
+                        damage_thr, coef, mat, buf, (ru, int64(0)), mode | ALPHA, visc)
     else:
         # the ply's last row: no fill above it (the whole width, so that the first row of the
         # next ply finds no tension from below)
@@ -420,13 +449,13 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
     node_fields = work.node_field
     arr = RowArrays(nodes.rows, nodes.mass, nodes.charge, yarns.inv_rest2, yarns.rest_length,
                     yarns.stiffness, sin.alpha, sout.alpha, work.damage_thr, node_fields,
-                    yarns.damping, sin.x)
+                    yarns.damping, sin.x, sin.strain, sout.strain, yarns.averaging_rate, dt)
     x0, v0, f0 = sin.x, sin.v, sin.f
     x1, v1, f1 = sout.x, sout.v, sout.f
     skip_err = work.flag
     err_num, err_den = work.err_num, work.err_den
     inv_mass, charge = nodes.inv_mass, nodes.charge
-    ru, rd = _block_start(j0, phys, prev, sin, sout, work, buf, 0, 0.0)
+    ru, rd = _block_start(j0, phys, prev, sin, sout, work, buf, 0, dt)
     rf, ra, rr = ROW_FORCE, ROW_VEL_EXPLICIT, ROW_ROTATION
     # arrays indexed directly with unsigned indices, no row views (_tensions says why)
     for j in range(j0, j1):
@@ -752,7 +781,7 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
     nf = work.node_field
     arr = RowArrays(nodes.rows, nodes.mass, nodes.charge, yarns.inv_rest2, yarns.rest_length,
                     yarns.stiffness, sin.alpha, sout.alpha, work.damage_thr, nf, yarns.damping,
-                    sin.x)
+                    sin.x, sin.strain, sout.strain, yarns.averaging_rate, dt)
     viscous = yarns.damping.size > 0
     mode = TANGENT | STATS | (VISCOUS if viscous else 0)
     inv_dt = 1.0 / dt if dt > 0.0 else 0.0
@@ -766,7 +795,7 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
     frame = work.frame
     cx, cy, cz = frame[0, 0], frame[0, 1], frame[0, 2]
     dirx, diry, dirz = frame[1, 0], frame[1, 1], frame[1, 2]
-    ru, rd = _block_start(j0, phys, x1, sin, sout, work, buf, mode, inv_dt)
+    ru, rd = _block_start(j0, phys, x1, sin, sout, work, buf, mode, dt)
     inv_mass, mass, charge = nodes.inv_mass, nodes.mass, nodes.charge
     fo, eo = sout.f, sout.e
     rf = ROW_FORCE

@@ -160,6 +160,11 @@ class Yarns(NamedTuple):
     solver.bulk_viscosity and m̄ the mean mass of its end nodes [N s/m]: a taut segment carries
     the tension η·α·L̇ besides its elastic one (central differences; docs/theory.md §2.1).
     Empty: no viscosity (the kernels then leave it out)."""
+    averaging_rate: np.ndarray = np.zeros(0)
+    """Brittle yarns with fabric.damage.strain_averaging = n > 0: each segment's 1/τ with τ =
+    n·√(m̄/stiffness) [1/s]; a segment breaks when its averaged stretch² ū², dū²/dt =
+    (max(U², 1) − ū²)/τ (StateArrays.strain), passes failure_stretch2. Empty: the
+    instantaneous U²."""
 
 
 class Material(NamedTuple):
@@ -349,7 +354,7 @@ class RowRecords(NamedTuple):
 class RowArrays(NamedTuple):
     """The arrays the per-row force (nodes._row_force) reads, built once per row block: a
     function bound to a record references and releases every array in it (atomic operations),
-    so the per-row code gets these twelve and not Physics's records (nodes._rotate_row)."""
+    so the per-row code gets these and not Physics's records (nodes._rotate_row)."""
 
     rows: np.ndarray
     """Nodes.rows."""
@@ -372,6 +377,14 @@ class RowArrays(NamedTuple):
     """Yarns.damping (empty: no viscosity)."""
     base: np.ndarray
     """The node positions at the step's start (the viscous tension's rate, (x − base)/Δt)."""
+    strain: np.ndarray
+    """The committed averaged stretch² (StateArrays.strain; empty: not averaged)."""
+    strain_trial: np.ndarray
+    """The trial averaged stretch² written by the evaluation."""
+    averaging_rate: np.ndarray
+    """Yarns.averaging_rate."""
+    dt: float
+    """The step Δt [s] (the averaged stretch's update; 0: none)."""
 
 
 class Physics(NamedTuple):
@@ -407,6 +420,9 @@ class StateArrays(NamedTuple):
     fv: np.ndarray = np.zeros((3, 0))
     """The viscous part of f (central differences with bulk viscosity: Yarns.damping), (3,
     node_count), for the energy bookkeeping of the next half kick; (3, 0) without viscosity."""
+    strain: np.ndarray = np.zeros(0)
+    """Each segment's averaged stretch² ū² (Yarns.averaging_rate), (seg_count,); (0,) where
+    brittle yarns break on the instantaneous stretch or the law is eq. 2.6."""
 
 
 # the fabric diagnostics of a state (diagnostics.fabric_diagnostics), in this order: kinetic

@@ -232,7 +232,7 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, plies, segs, t,
             # ply contact at the iterate, with its velocities (the start's at the first)
             ply_forces(phys, prev, v0 if k == 1 else v1, v0, work, work.ply_force, phi * dt)
         fabric_iterate(phys, prev, sin, StateArrays(cur, v1, f1, alpha_t, b_out, sout.e,
-                                                    sout.contact), work,
+                                                    sout.contact, sout.fv, sout.strain), work,
                        rowbuf, threads, t1, phi, dt)
         if plies is not None:
             ply_update(phys, work, cur, v1, f1, prev, x0, phi, dt)

@@ -137,7 +137,8 @@ def _resume(out: Path, scenario: Scenario | None, progress: ProgressFn | None,
     check_matches(scenario if scenario is not None else stored, version, stored, path)
     model = build_model(stored)
     if (state.node_x.shape != (3, model.node_count) or state.seg_alpha.shape
-            != (model.seg_count,)):
+            != (model.seg_count,) or state.seg_strain.shape
+            != model.physics.yarns.averaging_rate.shape):
         raise CheckpointError(f"{path}: its arrays do not fit the scenario's grid")
     history = out / "history.nc"
     status = history_status(history)

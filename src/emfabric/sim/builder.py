@@ -135,6 +135,17 @@ def _damping(q: float, stiffness: np.ndarray, mass: np.ndarray,
     return q * np.sqrt(stiffness * m)
 
 
+def _averaging_rate(n: float, stiffness: np.ndarray, mass: np.ndarray,
+                    ends: np.ndarray) -> np.ndarray:
+    """Yarns.averaging_rate: each segment's 1/τ, τ = n·√(m̄/k), n times the time a wave takes to
+    cross it (for a chain of equal nodes and segments, L0/c = √(m/k)), k its stiffness and m̄
+    the mean mass of its end nodes [1/s]; empty for n = 0 (the instantaneous stretch)."""
+    if n == 0.0:
+        return np.zeros(0)
+    m = 0.5 * (mass[ends[:, 0]] + mass[ends[:, 1]])
+    return np.sqrt(stiffness / m) / n
+
+
 def _assemble(scenario: Scenario) -> Model:
     """The Model of a scenario, not yet checked."""
     fab = scenario.fabric
@@ -185,6 +196,9 @@ def _assemble(scenario: Scenario) -> Model:
             ply_segments=ply_segments,
             failure_stretch2=seg_fail2,
             damping=_damping(scenario.bulk_viscosity, seg_stiffness, node_mass, seg_nodes),
+            averaging_rate=_averaging_rate(
+                fab.damage.strain_averaging if fab.damage.brittle else 0.0, seg_stiffness,
+                node_mass, seg_nodes),
         ),
         material=Material(
             kind=MATERIAL_KSV if mat.model == "kirchhoff-saint-venant" else MATERIAL_FUNG,

@@ -58,6 +58,9 @@ class State:
     node_fv: np.ndarray = field(default_factory=lambda: np.zeros((3, 0)))
     """The viscous part of node_f (central differences with solver.bulk_viscosity) [N], (3,
     node_count): the next half kick books its work; (3, 0) without viscosity."""
+    seg_strain: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """Each segment's averaged stretch² (brittle yarns with fabric.damage.strain_averaging:
+    records.Yarns.averaging_rate), (seg_count,); (0,) where it is not kept."""
     steps: int = 0
     """Accepted steps so far."""
     rejected: int = 0
@@ -89,7 +92,7 @@ class State:
     def arrays(self) -> StateArrays:
         """The arrays a step kernel reads or writes, as a named record."""
         return StateArrays(self.node_x, self.node_v, self.node_f, self.seg_alpha, self.body,
-                           self.node_e, self.node_contact, self.node_fv)
+                           self.node_e, self.node_contact, self.node_fv, self.seg_strain)
 
     @property
     def body_x(self) -> np.ndarray:
@@ -140,7 +143,13 @@ def blank_state(model: Model) -> State:
         body=np.zeros((BODY_ROWS, 3)),
         node_contact=np.zeros((4, n)),
         node_fv=np.zeros((3, n if m.physics.yarns.damping.size else 0)),
+        seg_strain=np.zeros(0),
     )
+    if m.physics.yarns.averaging_rate.size:
+        # the average starts at the initial stretch² (a slack yarn's at 1: unstrained)
+        ends = m.physics.yarns.ends
+        d = st.node_x[:, ends[:, 1]] - st.node_x[:, ends[:, 0]]
+        st.seg_strain = np.maximum((d * d).sum(axis=0) * m.physics.yarns.inv_rest2, 1.0)
     st.body[BODY_X] = m.body_x0
     st.body[BODY_V] = m.body_v0
     st.body[BODY_W] = m.body_w0
@@ -163,9 +172,10 @@ def update_forces(model: Model, state: State) -> None:
     fill_node_fields(m.field, state.node_x, state.node_v, 0.0, state.t, work.node_field)
     start = StateArrays(state.node_x, state.node_v, np.zeros_like(state.node_f),
                         state.seg_alpha, state.body, state.node_e, state.node_contact,
-                        np.zeros_like(state.node_fv))
+                        np.zeros_like(state.node_fv), state.seg_strain)
     out = StateArrays(scratch.node_x, scratch.node_v, state.node_f, scratch.seg_alpha,
-                      scratch.body, state.node_e, scratch.node_contact, state.node_fv)
+                      scratch.body, state.node_e, scratch.node_contact, state.node_fv,
+                      scratch.seg_strain)
     kick_rows(m.physics, start, out, work, state.t, 0.0, np.empty((ROWBUF_ROWS, m.nx + 1)))
     if m.has_body:
         b = state.body
