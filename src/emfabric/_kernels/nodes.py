@@ -336,8 +336,9 @@ def _scaled_segments(buf, scale, r, col, count):
 def _block_start(j0, phys, prev, sin, sout, work, buf, mode, dt):
     """Prepare a block's row buffer before its first row j0: zero the padding of the warp row
     and set the fill tensions (with mode & TANGENT their stiffness, with mode & VISCOUS their
-    viscous part at the rate since sin.x over 1/inv_dt) from the row below (recomputed, writing
-    no damage, so that blocks are independent; zero for the first row of a ply). Returns the
+    viscous part at the rate since sin.x over the step dt) from the row below (recomputed,
+    writing no damage or averaged stretch, so that blocks are independent; zero for the first
+    row of a ply). Returns the
     first buffer rows (fill up, fill down): ROW_FILL_UP, ROW_FILL_DOWN."""
     nodes, yarns, mat = phys.nodes, phys.yarns, phys.material
     rows = nodes.rows

@@ -171,9 +171,8 @@ class Damage(_Section):
     """"zohdi" (eq. 2.6: gradual, past critical_stretch at rate λ) or "brittle" (a yarn carries
     load up to its failure strain, then none). Not given: the law whose keys are written
     (failure_strain, weibull_shape, strain_averaging: brittle; critical_stretch, rate: zohdi),
-    else "brittle"
-    with a library material (fabric.material.name or fabric.style), else "zohdi" (the
-    paper's)."""
+    else "brittle" with a library material (fabric.material.name or fabric.style), else
+    "zohdi" (the paper's)."""
     critical_stretch: Annotated[float, Field(ge=1.0, allow_inf_nan=False)] = 1.03
     """U_crit of eq. 2.6 [-] (law = "zohdi")."""
     rate: NonNegFloat = 0.1
