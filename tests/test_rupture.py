@@ -135,6 +135,31 @@ def test_on_the_instantaneous_stretch_the_lumped_yarn_breaks_below_smiths_speed(
     assert (s.seg_alpha[at] == 0.0).any()
 
 
+def _driven_segment(n: float, eps_f: float = 0.02, h: float = 1e-3, v: float = 5.0):
+    """A 2 × 2 grid of brittle yarns whose two columns of nodes (1e9 times heavier than built)
+    are driven apart along x at ±v: its warp segments stretch at U = 1 + 2v t/h. Steps of τ/50.
+    Returns (model, state, τ, the warp segments)."""
+    keys = {"fabric.nodes": [2, 2], "fabric.size": [h, h], "fabric.edges": "free",
+            "fabric.rescale": False, "fabric.areal_density": RHO * math.pi * R**2 / h,
+            "fabric.yarn_radius": R, "fabric.material.youngs_modulus": E,
+            "fabric.damage.law": "brittle", "fabric.damage.failure_strain": eps_f,
+            "fabric.damage.strain_averaging": n, "solver.bulk_viscosity": 0.0}
+    model = build_model(fabric_only(**keys))
+    m = model.nodes.mass
+    tau = n * math.sqrt(0.5 * (m[0] + m[1]) / model.physics.yarns.stiffness[0])
+    assert 1.0 / model.physics.yarns.averaging_rate[0] == pytest.approx(tau, rel=1e-12)
+    # steps of τ/50 (the heavy nodes' own stable step is far longer)
+    model = build_model(fabric_only(**keys, **{"solver.dt_max": tau / 50}))
+    model.nodes.mass[:] *= 1e9
+    model.nodes.inv_mass[:] /= 1e9
+    s = initial_state(model)
+    x = model.nodes.x0[0]
+    s.node_v[0] = np.where(x < x.mean(), -v, v)
+    ends = model.physics.yarns.ends
+    warp = np.nonzero(np.abs(x[ends[:, 1]] - x[ends[:, 0]]) > 0)[0]
+    return model, s, tau, warp
+
+
 @pytest.mark.parametrize("n", [2.0, 5.0])
 def test_a_segment_stretched_at_a_constant_rate_breaks_when_its_average_passes(n):
     """A segment whose ends are driven apart (nodes 1e9 times heavier), U = 1 + r t, breaks
@@ -142,28 +167,9 @@ def test_a_segment_stretched_at_a_constant_rate_breaks_when_its_average_passes(n
     at the time the linear ODE's exact solution gives (later than the instantaneous
     criterion's ε_f/r by about τ), to within two steps (the step that passes it, and the
     backward-Euler average's lag of O(Δt))."""
-    eps_f, h = 0.02, 1e-3
-    keys = {"fabric.nodes": [2, 2], "fabric.size": [h, h], "fabric.edges": "free",
-            "fabric.rescale": False, "fabric.areal_density": RHO * math.pi * R**2 / h,
-            "fabric.yarn_radius": R, "fabric.material.youngs_modulus": E,
-            "fabric.damage.law": "brittle", "fabric.damage.failure_strain": eps_f,
-            "fabric.damage.strain_averaging": n, "solver.bulk_viscosity": 0.0}
-    model = build_model(fabric_only(**keys))
-    yarns = model.physics.yarns
-    m = model.nodes.mass
-    tau = n * math.sqrt(0.5 * (m[0] + m[1]) / yarns.stiffness[0])
-    assert 1.0 / yarns.averaging_rate[0] == pytest.approx(tau, rel=1e-12)
-    # steps of τ/50 (the heavy nodes' own stable step is far longer)
-    model = build_model(fabric_only(**keys, **{"solver.dt_max": tau / 50}))
-    yarns = model.physics.yarns
-    m = model.nodes.mass
-    m *= 1e9
-    model.nodes.inv_mass[:] /= 1e9
-    s = initial_state(model)
-    v = 5.0  # each end at ±v along x: r = 2v/h = 1e4 /s
-    x = model.nodes.x0[0]
-    s.node_v[0] = np.where(x < x.mean(), -v, v)
-    r = 2 * v / h
+    eps_f, h, v = 0.02, 1e-3, 5.0
+    model, s, tau, warp = _driven_segment(n, eps_f, h, v)
+    r = 2 * v / h  # 1e4 /s
 
     # ū² for U² = (1 + r t)² = 1 + 2rt + r²t², ū²(0) = 1: the linear ODE's exact solution
     def avg(t):
@@ -175,16 +181,46 @@ def test_a_segment_stretched_at_a_constant_rate_breaks_when_its_average_passes(n
     instantaneous = eps_f / r
     assert t_b > instantaneous + 0.5 * tau  # the average lags a ramp by ~τ
 
-    warp = np.nonzero(np.abs(np.diff(model.nodes.x0[0][yarns.ends], axis=1))[:, 0] > 0)[0]
     integ = make_integrator(model)
     s2 = s.copy()
     while (s.seg_alpha[warp] > 0.0).all():
         integ.step(s, s2)
         s, s2 = s2, s
     dt = s.last_dt
-    assert (s.seg_alpha[warp] == 0.0).all()
     assert dt == pytest.approx(tau / 50)
+    assert (s.seg_alpha[warp] == 0.0).all()
     assert s.t == pytest.approx(t_b, abs=2 * dt)  # the step that passes it, + O(Δt) lag
+
+
+def test_a_checkpoint_keeps_the_averaged_stretch(tmp_path):
+    """The driven segment written to a checkpoint halfway to its break (its average under
+    way) and read back breaks at the same step as the run never written, to the bit (read
+    back without its averages it would break on the instantaneous stretch, 50 steps early;
+    with them reset to the unstrained 1, 3 steps late)."""
+    from emfabric.io.checkpoint import RunPosition, read_checkpoint, write_checkpoint
+
+    model, s0, tau, warp = _driven_segment(5.0)
+
+    def march(s, steps=None):
+        integ = make_integrator(model)
+        s2 = s.copy()
+        done = 0
+        while (s.seg_alpha[warp] > 0.0).all() if steps is None else done < steps:
+            integ.step(s, s2)
+            s, s2 = s2, s
+            done += 1
+        return s
+
+    whole = march(s0.copy())
+    half = march(s0.copy(), whole.steps // 2)
+    assert (half.seg_alpha == 1.0).all() and half.seg_strain.max() > 1.0
+    path = tmp_path / "checkpoint.nc"
+    write_checkpoint(path, model, half, RunPosition(0, 0, 0.0, 0.0))
+    _, _, read, _ = read_checkpoint(path)
+    resumed = march(read)
+    assert resumed.steps == whole.steps
+    for name in ("node_x", "node_v", "seg_alpha", "seg_strain"):
+        np.testing.assert_array_equal(getattr(resumed, name), getattr(whole, name))
 
 
 def test_without_bulk_viscosity_the_wave_front_breaks_the_yarn_far_from_the_impact():
