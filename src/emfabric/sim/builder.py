@@ -131,8 +131,12 @@ def _damping(q: float, stiffness: np.ndarray, mass: np.ndarray,
     mode's damping ratio is then q); empty for q = 0."""
     if q == 0.0:
         return np.zeros(0)
-    m = 0.5 * (mass[ends[:, 0]] + mass[ends[:, 1]])
-    return q * np.sqrt(stiffness * m)
+    return q * np.sqrt(stiffness * _end_mass(mass, ends))
+
+
+def _end_mass(mass: np.ndarray, ends: np.ndarray) -> np.ndarray:
+    """m̄ of each segment: the mean mass of its two end nodes [kg]."""
+    return 0.5 * (mass[ends[:, 0]] + mass[ends[:, 1]])
 
 
 def _averaging_rate(n: float, stiffness: np.ndarray, mass: np.ndarray,
@@ -142,8 +146,7 @@ def _averaging_rate(n: float, stiffness: np.ndarray, mass: np.ndarray,
     the mean mass of its end nodes [1/s]; empty for n = 0 (the instantaneous stretch)."""
     if n == 0.0:
         return np.zeros(0)
-    m = 0.5 * (mass[ends[:, 0]] + mass[ends[:, 1]])
-    return np.sqrt(stiffness / m) / n
+    return np.sqrt(stiffness / _end_mass(mass, ends)) / n
 
 
 def _assemble(scenario: Scenario) -> Model:
