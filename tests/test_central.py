@@ -86,7 +86,11 @@ def test_free_fabric_struck_conserves_momentum():
     """Free sheet + spinning sphere struck obliquely, no field: linear momentum of the pair is
     conserved to round-off (the body receives exactly −J); angular momentum to a first-order
     error in Δt (the placement on the surface moves a node without momentum, as in the
-    φ-scheme: test_impact.py), halving with the step."""
+    φ-scheme: test_impact.py), halving with the step. Putting a sliding or newly sticking
+    node where the velocity after its impulse drifts it (docs/theory.md §5.2) is such a move:
+    it raised the error at courant 0.5 from 2.4e-5 to 1.6e-4 of the initial angular momentum
+    (7.8e-5, 3.9e-5, 2.0e-5 at 0.25, 0.125, 0.0625), while it brought paper-spin's ω 30× closer
+    to the converged run at that step."""
     errors = []
     for courant in (0.5, 0.25, 0.125):
         ds = run(_struck(**{"solver.courant": courant, "solver.end_time": 60e-6})).history
@@ -95,7 +99,7 @@ def test_free_fabric_struck_conserves_momentum():
         assert np.abs(p - p[0]).max() < 1e-14 * np.abs(p[0]).max()
         ang = ds.fabric_angular_momentum.values + ds.projectile_angular_momentum.values
         errors.append(np.linalg.norm(ang - ang[0], axis=1).max() / np.linalg.norm(ang[0]))
-    assert errors[0] < 1e-4
+    assert errors[0] < 2e-4
     assert (errors[0] / errors[-1]) ** 0.5 >= 1.8, errors
 
 
@@ -274,6 +278,13 @@ def test_friction_work_of_a_sheet_struck_on_a_face(pull):
         slip = vy2 * tau + 0.5 * a * tau ** 2
         exact = 4 * (mu_d * m * vz * 0.5 * (vy + vy2) + mu_d * q * ez * slip)
         assert float(np.mean(res.state.arrays.v[1])) == pytest.approx(vy2 + a * tau, rel=5e-3)
+        # and where it slides: y = q E_y t_c²/2m + the slip. A node drifted with its velocity
+        # before the friction impulse and then only projected runs ahead of it, by about
+        # μ_d (q E_z/m) Δt² a step: a first-order error (measured 3.0e-3 of y at courant 0.25,
+        # 7.4e-4 at 0.0625). It is put where the velocity after the impulse drifts it:
+        # measured 3.3e-5 at both steps
+        y = 0.5 * q * pull * tc ** 2 / m + slip
+        assert float(np.mean(res.state.arrays.x[1])) == pytest.approx(y, rel=2e-4)
     else:
         exact = 4 * 0.5 * m * vy ** 2
         # stuck: v_{n+1} holds only the half kick of the last force (q E_y Δt/2m ≈ 0.05 m/s)

@@ -173,7 +173,7 @@ def _mid_rotation(body, rot0, h_half, dt, tol, scratch, rot1):
 
 
 @njit(cache=True)
-def _node_contact(phys, sin, sout, work, ncand):
+def _node_contact(phys, sin, sout, work, ncand, dt):
     """Contact of the candidate nodes after the drift (see the module docstring): impulses on
     sout.v (the velocity before them in work.v_pre), placement on sout.x, the contact records
     in work.c_*, the new contact state in sout.contact. The body's state in sout.body holds
@@ -218,9 +218,22 @@ def _node_contact(phys, sin, sout, work, ncand):
                 for c in range(3):
                     x1[c, n] = centre[c] + r[c]
             continue
-        if slid and stuck:
-            # it slides off its material point: on the surface where it is
-            _g, r, nh = surface_point(body, rot, d)
+        if slid or not stuck:
+            # a node that slides (or sticks afresh) is put where its drift with the velocity
+            # after the impulse takes it (the tangential part: the normal one is the
+            # projection's), as the φ-scheme's step 6 and segment contact do: without it the
+            # node keeps the slip of its velocity before the impulse, Δt J_t/m a step
+            # (docs/theory.md §5.2); the impulse again there with the same decision, so that
+            # its normal part lies along the normal where the reaction acts
+            jn = j[0] * nh[0] + j[1] * nh[1] + j[2] * nh[2]
+            k = dt / m
+            _g, r, nh = surface_point(body, rot, (d[0] + k * (j[0] - jn * nh[0]),
+                                                  d[1] + k * (j[1] - jn * nh[1]),
+                                                  d[2] + k * (j[2] - jn * nh[2])))
+            wr = cross(omega, r)
+            vs = (vel[0] + wr[0], vel[1] + wr[1], vel[2] + wr[2])
+            j, slid = contact_impulse(m, (v1[0, n], v1[1, n], v1[2, n]), vs, nh, law,
+                                      SLIDE if slid else STICK)
         if not slid:
             a = to_body_frame(rot, r)
             for c in range(3):
@@ -424,7 +437,7 @@ def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol
             n = work.cand[idx]
             for c in range(3):
                 work.xbuf[c, n] = sout.x[c, n]
-        nc = _node_contact(phys, sin, sout, work, ncand)
+        nc = _node_contact(phys, sin, sout, work, ncand, dt)
         if segs is not None:
             nc = segment_contact(nodes, phys.yarns, body, phys.contact, b_out, nseg, nc,
                                  sout.x, sout.v, work, dt)

@@ -92,7 +92,7 @@ class CentralDifference(IntegratorBase):
         rowbuf = self.rowbuf if self.rowbuf is not None else np.empty((ROWBUF_ROWS,
                                                                        self.model.nx + 1))
         out = [(drift_rows, (phys, a, a, work, 0.0, 0.0, rowbuf)),
-               (_node_contact, (phys, a, a, work, 0))]
+               (_node_contact, (phys, a, a, work, 0, 0.0))]
         plies, segs = self.switches
         if plies is not None:
             out.append((ply_contact, (phys, a, a.x, a.v, work, 0.0, a.contact[3])))
