@@ -781,10 +781,9 @@ contact phase as a fraction of the peak; |Δω| / |ω| when contact ends; None: 
 LOADED_END = {100: 100e-6, 200: 30e-6, 400: 10e-6, 1000: 3e-6}
 """(i)'s simulated time per grid [s] (from the start: the sphere reaches the sheet at once)."""
 FINE = {"ogive-field": 16}
-"""(h)'s converged run: central differences at the default courant / FINE (8 where not named:
-0.0625 for the spheres' default 0.5), checked at courant / (2 FINE). ogive-field (default
-0.25) needs 16: down to courant / 4 its segment contacts stick where the converged run's
-slide (docs/theory.md §5.2; `--ladder ogive-field`)."""
+"""(h)'s converged run: central differences at courant / FINE (4 where not named), checked at
+courant / (2 FINE). ogive-field needs 16: down to courant / 4 its segment contacts stick where
+the converged run's slide (docs/theory.md §5.2; `--ladder ogive-field`)."""
 
 
 def bench_side_by_side(names: list[str], cache: Path | None) -> list[dict]:
@@ -795,8 +794,8 @@ def bench_side_by_side(names: list[str], cache: Path | None) -> list[dict]:
     out = []
     for name in names:
         comps = SIDE_BY_SIDE.get(name, ((0, 1, 2), None, None))[0]
-        courant = load_scenario(name, {"solver.integrator": "central-difference"}).courant
-        k = FINE.get(name, 8)
+        courant = load_scenario(name, {"solver.integrator": "central-difference"}).solver.courant
+        k = FINE.get(name, 4)
         fine = {"solver.integrator": "central-difference", "solver.courant": courant / k}
         ref, ref_summary = _history_run(name, fine, cache)
         chk, _ = _history_run(name, {**fine, "solver.courant": courant / (2 * k)}, cache)
@@ -863,7 +862,7 @@ def bench_ladder(name: str, levels: int, cache: Path | None) -> dict:
     from emfabric import load_scenario
 
     comps = SIDE_BY_SIDE.get(name, ((0, 1, 2), None, None))[0]
-    courant = load_scenario(name, {"solver.integrator": "central-difference"}).courant
+    courant = load_scenario(name, {"solver.integrator": "central-difference"}).solver.courant
     rungs = []
     for k in range(levels):
         c = courant / 2 ** k

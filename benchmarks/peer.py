@@ -67,10 +67,8 @@ HERE = Path(__file__).resolve().parent
 SCENARIO = "paper-no-field"
 PEER_DIR = "/work/peer/VibeDynaLITE"
 PEER_PYTHON = "/work/peer/venv/bin/python"
-COURANT = 0.5
-"""emfabric's default solver.courant for the sphere of the struck sheet
-(config/scenario.py COURANT_NODES; 0.25 before commit of 2026-11-29, when benchmarks/PEER.md's
-figures were measured with the peer's cfl at 0.25·√2)."""
+COURANT = 0.25
+"""emfabric's default solver.courant (config/scenario.py SolverSpec)."""
 PEER_CFL = COURANT * math.sqrt(2.0)
 """The peer's Δt = cfl · min sqrt(m/Σk); emfabric's central differences take courant ×
 2/ω_max with ω_max² ≤ 2Σk/m, i.e. courant·√2·sqrt(m/Σk): the same fraction of the same

@@ -411,35 +411,6 @@ def test_default_integrator_and_what_chooses_the_phi_scheme():
         load_scenario("paper-field", {"contact.placement": "closest-point", **CD})
 
 
-def test_default_courant_follows_the_contact_mode():
-    """solver.courant not given: 0.5 where the fabric meets the projectile at its nodes only
-    (the sphere, or any shape with contact.segments = false), 0.25 with segment contact; a
-    written value wins; the run takes it (Δt of the first step = courant × the stable step of
-    the sheet at rest) and the scenario file shows it."""
-    from emfabric._kernels.explicit import stable_step
-    from emfabric.config.scenario import COURANT_NODES, COURANT_SEGMENTS
-    from emfabric.sim.model import Options
-
-    assert (COURANT_NODES, COURANT_SEGMENTS) == (0.5, 0.25)
-    cases = (("paper-field", {}, 0.5), ("ogive-field", {}, 0.25), ("fsp", {}, 0.25),
-             ("paper-field", {"contact.segments": True}, 0.25),
-             ("ogive-field", {"contact.segments": False}, 0.5),
-             ("ogive-field", {"solver.courant": 0.4}, 0.4))
-    for name, over, expected in cases:
-        sc = load_scenario(name, over)
-        assert sc.courant == expected, (name, over)
-        assert Options.of(sc).courant == expected
-    assert "courant = (not set: 0.5 in this scenario)" in \
-        load_scenario("paper-field").to_commented_toml()
-    sc = make(**{"fabric.nodes": [40, 40], "solver.end_time": 2e-6, "projectile.gap": 0.05,
-                 **CD})
-    model = build_model(sc)
-    crit = stable_step(model.physics, initial_state(model).arrays.x,
-                       np.ones(model.seg_count), np.zeros(model.node_count))
-    dt = float(run(sc).history.dt[1])
-    assert dt == pytest.approx(0.5 * crit, rel=1e-12)
-
-
 def test_step_below_dt_min_stops_with_a_clear_error():
     """A stable step below solver.dt_min stops the run at once, saying so."""
     from emfabric.integrators import DivergenceError

@@ -855,16 +855,6 @@ default linear bulk-viscosity coefficient): measured on Smith's struck yarn, doc
 §2.1."""
 
 
-COURANT_NODES = 0.5
-"""solver.courant where it is not given and the fabric meets the projectile at its nodes only:
-paper-field's and paper-spin's spin within 1.2 % and 1.8 % of their peaks against a run at
-an eighth of the step, with a sixth of the φ-scheme's force evaluations (docs/theory.md §4.1)."""
-COURANT_SEGMENTS = 0.25
-"""solver.courant where it is not given and segment contact is on: the stick band of a
-segment's contact point widens with the step (docs/theory.md §5.2), so segment runs keep the
-smaller step."""
-
-
 class SolverSpec(_Section):
     integrator: Literal["phi", "central-difference"] = "central-difference"
     """Time integration: "central-difference" (explicit, one force evaluation per step, Δt =
@@ -872,11 +862,9 @@ class SolverSpec(_Section):
     implicit φ-scheme (fixed-point iteration, adaptive Δt, eq. 3.9). Not given, it is "phi"
     when the scenario sets a key only the φ-scheme reads (PHI_KEYS: phi, tolerance,
     target_iterations, …), else "central-difference"."""
-    courant: Annotated[float, Field(gt=0.0, le=1.0)] | None = None
+    courant: Annotated[float, Field(gt=0.0, le=1.0)] = 0.25
     """central-difference: the fraction of the stable step (2/ω_max, ω_max² ≤ max 2Σk_t/m at the
-    current stretches) taken [-]. Not given: COURANT_NODES (0.5) where the projectile meets
-    the fabric at its nodes only (a sphere, or contact.segments = false), COURANT_SEGMENTS
-    (0.25) where segment contact is on (docs/theory.md §4.1)."""
+    current stretches) taken [-]."""
     bulk_viscosity: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
     """central-difference: q of the yarns' linear bulk viscosity [-]: a taut segment carries,
     besides its elastic tension, q·√(k m)·L̇ (k its axial stiffness 𝔼A0/L0, m the mass of its
@@ -991,22 +979,6 @@ class Scenario(_Section):
                 "\"central-difference\" with it, or bulk_viscosity = 0 (or none) with the "
                 "φ-scheme")
         return self
-
-    @property
-    def segment_contact(self) -> bool:
-        """Whether contact is resolved at the yarn segments too: contact.segments, "auto" on
-        for every shape but the sphere."""
-        seg = self.contact.segments
-        return self.projectile.shape != "sphere" if seg == "auto" else bool(seg)
-
-    @property
-    def courant(self) -> float:
-        """The courant number central differences take: solver.courant, or when not given
-        COURANT_SEGMENTS with segment contact, COURANT_NODES without."""
-        c = self.solver.courant
-        if c is not None:
-            return float(c)
-        return COURANT_SEGMENTS if self.segment_contact else COURANT_NODES
 
     @property
     def bulk_viscosity(self) -> float:
@@ -1147,8 +1119,7 @@ def _section_lines(model: BaseModel, path: str, out: list[str],
 def _commented(scenario: Scenario) -> str:
     out: list[str] = []
     # keys whose default depends on the rest of the scenario: the value it takes here
-    effective = {"solver.bulk_viscosity": scenario.bulk_viscosity,
-                 "solver.courant": scenario.courant}
+    effective = {"solver.bulk_viscosity": scenario.bulk_viscosity}
     _section_lines(scenario, "", out, _derived_paths(scenario), effective)
     return "\n".join(out).lstrip("\n") + "\n"
 

@@ -182,7 +182,9 @@ def _assemble(scenario: Scenario) -> Model:
     geo, frame = pose.geometry, pose.frame
     charge_pos = np.array([c.position for c in pr.charges], dtype=float).reshape(-1, 3)
     charge_q = np.array([c.charge for c in pr.charges], dtype=float)
-    segments = scenario.segment_contact
+    segments = scenario.contact.segments
+    if segments == "auto":
+        segments = geo.kind != "sphere"
 
     physics = Physics(
         nodes=Nodes(nx, ny, node_x0, node_mass, node_inv_mass, node_charge, rows, ply_nodes,

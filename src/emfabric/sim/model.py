@@ -64,9 +64,8 @@ class Options:
     """Wall time between checkpoints [s]."""
     integrator: str = "central-difference"
     """"central-difference" (the default, as a scenario's) or "phi"."""
-    courant: float = 0.5
-    """central-difference: fraction of the stable step taken (Scenario.courant; a Model built
-    in Python without a scenario: COURANT_NODES)."""
+    courant: float = 0.25
+    """central-difference: fraction of the stable step taken (the scenario's default)."""
     bulk_viscosity: float = 0.0
     """central-difference: the yarns' bulk viscosity q (Scenario.bulk_viscosity; the kernels
     read Yarns.damping)."""
@@ -80,7 +79,7 @@ class Options:
                    float(s.dt_max), float(s.dt_min), float(s.dt_initial or s.dt_max), s.scheme,
                    int(s.anderson_depth), s.predictor, float(s.end_time),
                    float(o.snapshot_interval), float(o.checkpoint_seconds), s.integrator,
-                   scenario.courant, scenario.bulk_viscosity)
+                   float(s.courant), scenario.bulk_viscosity)
 
 
 @dataclass(frozen=True, eq=False)
