@@ -91,7 +91,7 @@ def parse_args(argv=None) -> argparse.Namespace:
                     help="plies in the pack, touching, in both codes (default 1: one sheet)")
     ap.add_argument("--repeat", type=int, default=1, help="timed runs after the warm-up (best)")
     ap.add_argument("--peer-cfl", type=float, default=PEER_CFL,
-                    help="the peer's CFL factor (default 0.5·√2, emfabric's rule; its GUI: 0.8)")
+                    help="the peer's CFL factor (default 0.25·√2, emfabric's rule; its GUI: 0.8)")
     ap.add_argument("--peer-k-penalty", type=float, default=None,
                     help="the peer's contact penalty [N/m] (default: its worker's rule, 10 × "
                          "the mean spring stiffness)")
