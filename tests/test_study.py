@@ -288,6 +288,55 @@ def test_v50_of_shots_that_separate_is_the_gap():
     assert 81.11 < fit["v50"] < 91.25
 
 
+def _fake_fire(threshold):
+    """A `fire` for studies.ballistic.seeded_shots that runs nothing: a shot perforates when
+    faster than `threshold` (None: every shot perforates); it records every batch fired."""
+    batches = []
+
+    def fire(batch):
+        batches.append([b[0] for b in batch])
+        return [{"speed": v, "seed": sd, "perforated": int(threshold is None or v > threshold),
+                 "residual_speed": 0.0, "status": "complete"} for v, sd, _sc in batch]
+    return fire, batches
+
+
+def test_seeded_shots_widen_until_both_outcomes_are_in():
+    """A seeded spread wider than the first band (0.8-1.2 V_BL): the seeds fire again a band
+    lower (every shot perforated) or higher (every one stopped), each SEED_WIDEN beyond the
+    last, until stopped and perforating shots are both in; V50 then lies in the gap between
+    them. No band with both: a StudyError saying what was fired."""
+    from emfabric.config.scenario import load_scenario
+    from emfabric.studies.ballistic import SEED_SPEEDS, SEED_WIDEN, fit_v50, seeded_shots
+    from emfabric.studies.sweep import StudyError
+
+    sc = load_scenario("rupture")
+    n = len(SEED_SPEEDS)
+    # the limit at 30 m/s, V_BL said 100: bands 80-120, 53-80, 36-53 all perforate, 24-36 not
+    fire, batches = _fake_fire(30.0)
+    rows, bands = seeded_shots(fire, sc, 100.0, 2)
+    assert bands == 4 and len(batches) == 4 and len(rows) == 4 * 2 * n
+    for k, speeds in enumerate(batches):
+        lo, hi = 100.0 * SEED_SPEEDS[0] / SEED_WIDEN**k, 100.0 * SEED_SPEEDS[-1] / SEED_WIDEN**k
+        assert min(speeds) == pytest.approx(lo, rel=1e-12)
+        assert max(speeds) == pytest.approx(hi, rel=1e-12)
+    fit = fit_v50([r["speed"] for r in rows], [r["perforated"] for r in rows], bootstrap=20)
+    lo, hi = fit["ci95"]
+    assert fit["separated"] and lo < 30.0 < hi and hi - lo < 0.06 * 30.0
+    # the limit above the first band: one band up
+    fire, batches = _fake_fire(150.0)
+    rows, bands = seeded_shots(fire, sc, 100.0, 1)
+    assert bands == 2 and max(batches[1]) == pytest.approx(180.0, rel=1e-12)
+    assert {r["perforated"] for r in rows} == {0, 1}
+    # the first band has both: nothing more is fired
+    fire, batches = _fake_fire(100.0)
+    assert seeded_shots(fire, sc, 100.0, 3)[1] == 1 and len(batches) == 1
+    # every shot perforates, down to 0.24 V_BL: an error naming the speeds, not a bad fit
+    fire, batches = _fake_fire(None)
+    with pytest.raises(StudyError, match=r"every one of the 72 decided seeded shots from "
+                                         r"23\.7 to 120 m/s perforated"):
+        seeded_shots(fire, sc, 100.0, 2)
+
+
 def _direct_shot(speed):
     """The CLI's scenario fired at `speed` straight down by emfabric.run alone (no study code);
     the outcome read off the trajectory: +1 through (moving on below the sheet, nothing

@@ -310,6 +310,9 @@ def ballistic_limit(
         raise typer.Exit(EXIT_FAILED if rounds else EXIT_INPUT) from None
     with writing(out):
         files = write_outputs(res, out)
+    if "v50_error" in res:  # V_BL written; the V50 asked for was not found
+        error(f"{res['v50_error']} (V_BL and every shot are in {out})")
+        raise typer.Exit(EXIT_FAILED)
     for nm in res.get("non_monotone", []):
         console.print("[yellow]warning:[/] non-monotone: a shot at "
                       f"{nm['stopped']:.4g} m/s stopped " + (

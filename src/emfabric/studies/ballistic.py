@@ -28,6 +28,12 @@ SPEEDS_ABOVE = (1.05, 1.1, 1.2, 1.35, 1.5, 1.75, 2.0)
 """Striking speeds above V_BL run for the Lambert–Jonas fit, as multiples of V_BL."""
 SEED_SPEEDS = tuple(np.linspace(0.8, 1.2, 9))
 """Striking speeds of each seed's shots, as multiples of V_BL."""
+SEED_WIDEN = 1.5
+"""Where every seeded shot so far perforated (or every one was stopped), the seeds fire again
+at the speeds of the last band divided (multiplied) by this factor: the next band of speeds,
+adjoining the last (0.8 × 1.5 = 1.2)."""
+SEED_WIDENINGS = 3
+"""The most bands fired beyond the first (down to 0.24 × V_BL, up to 4.05 × V_BL)."""
 
 
 def lambert_jonas(vs: np.ndarray, a: float, p: float, vbl: float) -> np.ndarray:
@@ -225,16 +231,15 @@ def ballistic_limit(scenario: Scenario, out, *, seeds: int = 0, tolerance: float
         result: dict[str, Any] = {"v_bl": v_bl, "v_bl_bracket": [lo, hi],
                                   "tolerance": tolerance, "lambert_jonas": lj}
         if seeds > 0:
-            spacing = _node_spacing(scenario)
-            batch = []
-            for sd in range(1, seeds + 1):
-                rng = np.random.default_rng(sd)
-                jit = tuple(float(x) for x in rng.uniform(-0.5, 0.5, 2) * spacing)
-                for f in SEED_SPEEDS:
-                    batch.append((f * v_bl, sd, shot(scenario, f * v_bl, sd, jit)))
-            rows = [r for r in fire(batch) if r["perforated"] in (0, 1)]
-            result["v50"] = fit_v50([r["speed"] for r in rows], [r["perforated"] for r in rows])
             result["seeds"] = seeds
+            try:
+                rows, bands = seeded_shots(fire, scenario, v_bl, seeds)
+            except StudyError as err:  # V_BL and its shots are still worth writing
+                result["v50_error"] = str(err)
+            else:
+                result["v50"] = fit_v50([r["speed"] for r in rows],
+                                        [r["perforated"] for r in rows])
+                result["v50"]["bands"] = bands
     except KeyboardInterrupt:
         interrupted = True
         raise
@@ -246,6 +251,43 @@ def ballistic_limit(scenario: Scenario, out, *, seeds: int = 0, tolerance: float
     result["scenario"] = scenario.name
     result["non_monotone"] = non_monotone(shots, result["v_bl"])
     return result
+
+
+def seeded_shots(fire, scenario: Scenario, v_bl: float,
+                 seeds: int) -> tuple[list[dict[str, Any]], int]:
+    """The decided shots of seeds 1..`seeds` (each its modulus draw and its impact point moved
+    by up to half a node spacing) at the speeds SEED_SPEEDS × V_BL, and the number of bands
+    fired. Where every one of them perforated (or every one was stopped), the seeds fire again
+    a band lower (higher) by SEED_WIDEN, up to SEED_WIDENINGS times, until both outcomes are
+    in: a ballistic limit whose seeded spread is wider than ±20 % of the deterministic V_BL
+    still gets its V50. `fire` runs a batch of (speed, seed, Scenario) and returns one row
+    ({"speed", "perforated", ...}) per shot. Raises StudyError when no band brings both."""
+    from emfabric.studies.sweep import StudyError
+
+    spacing = _node_spacing(scenario)
+    jitter = {}
+    for sd in range(1, seeds + 1):
+        rng = np.random.default_rng(sd)
+        jitter[sd] = tuple(float(x) for x in rng.uniform(-0.5, 0.5, 2) * spacing)
+    rows: list[dict[str, Any]] = []
+    scale = 1.0
+    for band in range(1, SEED_WIDENINGS + 2):
+        batch = [(f * scale * v_bl, sd, shot(scenario, f * scale * v_bl, sd, jitter[sd]))
+                 for sd in range(1, seeds + 1) for f in SEED_SPEEDS]
+        rows += [r for r in fire(batch) if r["perforated"] in (0, 1)]
+        through = sum(r["perforated"] for r in rows)
+        if 0 < through < len(rows):
+            return rows, band
+        if not rows:
+            break
+        scale = scale / SEED_WIDEN if through == len(rows) else scale * SEED_WIDEN
+    speeds = [r["speed"] for r in rows]
+    what = ("no seeded shot was decided (perforated or stopped): a longer solver.end_time "
+            "decides them" if not rows else
+            f"every one of the {len(rows)} decided seeded shots from {min(speeds):.4g} to "
+            f"{max(speeds):.4g} m/s {'perforated' if through else 'was stopped'}")
+    raise StudyError(f"V50: {what}, the deterministic V_BL being {v_bl:.4g} m/s; "
+                     "a V50 needs shots of both outcomes")
 
 
 def non_monotone(shots: list[dict[str, Any]], v_bl: float) -> list[dict[str, Any]]:
