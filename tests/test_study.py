@@ -314,11 +314,14 @@ def test_seeded_shots_widen_until_both_outcomes_are_in():
     # the limit at 30 m/s, V_BL said 100: bands 80-120, 53-80, 36-53 all perforate, 24-36 not
     fire, batches = _fake_fire(30.0)
     rows, bands = seeded_shots(fire, sc, 100.0, 2)
-    assert bands == 4 and len(batches) == 4 and len(rows) == 4 * 2 * n
+    # each band after the first adjoins the last: its shared end is not fired twice
+    assert bands == 4 and len(batches) == 4 and len(rows) == 2 * (n + 3 * (n - 1))
     for k, speeds in enumerate(batches):
-        lo, hi = 100.0 * SEED_SPEEDS[0] / SEED_WIDEN**k, 100.0 * SEED_SPEEDS[-1] / SEED_WIDEN**k
+        lo = 100.0 * SEED_SPEEDS[0] / SEED_WIDEN**k
+        hi = 100.0 * SEED_SPEEDS[-1 if k == 0 else -2] / SEED_WIDEN**k
         assert min(speeds) == pytest.approx(lo, rel=1e-12)
         assert max(speeds) == pytest.approx(hi, rel=1e-12)
+    assert len({(r["speed"], r["seed"]) for r in rows}) == len(rows)
     fit = fit_v50([r["speed"] for r in rows], [r["perforated"] for r in rows], bootstrap=20)
     lo, hi = fit["ci95"]
     assert fit["separated"] and lo < 30.0 < hi and hi - lo < 0.06 * 30.0
@@ -326,13 +329,14 @@ def test_seeded_shots_widen_until_both_outcomes_are_in():
     fire, batches = _fake_fire(150.0)
     rows, bands = seeded_shots(fire, sc, 100.0, 1)
     assert bands == 2 and max(batches[1]) == pytest.approx(180.0, rel=1e-12)
+    assert min(batches[1]) == pytest.approx(100.0 * SEED_SPEEDS[1] * SEED_WIDEN, rel=1e-12)
     assert {r["perforated"] for r in rows} == {0, 1}
     # the first band has both: nothing more is fired
     fire, batches = _fake_fire(100.0)
     assert seeded_shots(fire, sc, 100.0, 3)[1] == 1 and len(batches) == 1
     # every shot perforates, down to 0.24 V_BL: an error naming the speeds, not a bad fit
     fire, batches = _fake_fire(None)
-    with pytest.raises(StudyError, match=r"every one of the 72 decided seeded shots from "
+    with pytest.raises(StudyError, match=r"every one of the 66 decided seeded shots from "
                                          r"23\.7 to 120 m/s perforated"):
         seeded_shots(fire, sc, 100.0, 2)
 

@@ -271,16 +271,21 @@ def seeded_shots(fire, scenario: Scenario, v_bl: float,
         jitter[sd] = tuple(float(x) for x in rng.uniform(-0.5, 0.5, 2) * spacing)
     rows: list[dict[str, Any]] = []
     scale = 1.0
+    factors = SEED_SPEEDS
     for band in range(1, SEED_WIDENINGS + 2):
         batch = [(f * scale * v_bl, sd, shot(scenario, f * scale * v_bl, sd, jitter[sd]))
-                 for sd in range(1, seeds + 1) for f in SEED_SPEEDS]
+                 for sd in range(1, seeds + 1) for f in factors]
         rows += [r for r in fire(batch) if r["perforated"] in (0, 1)]
         through = sum(r["perforated"] for r in rows)
         if 0 < through < len(rows):
             return rows, band
         if not rows:
             break
-        scale = scale / SEED_WIDEN if through == len(rows) else scale * SEED_WIDEN
+        # the next band adjoins this one: its speed at the shared end is not fired again
+        if through == len(rows):
+            scale, factors = scale / SEED_WIDEN, SEED_SPEEDS[:-1]
+        else:
+            scale, factors = scale * SEED_WIDEN, SEED_SPEEDS[1:]
     speeds = [r["speed"] for r in rows]
     what = ("no seeded shot was decided (perforated or stopped): a longer solver.end_time "
             "decides them" if not rows else
