@@ -113,6 +113,10 @@ def test_a_folder_is_not_a_scenario(tmp_path, monkeypatch):
         load_scenario("runs/x")
     assert str(info.value) == ("scenario 'runs/x' is a folder, not a TOML file; allowed: a "
                                ".toml file or a built-in name (emfabric scenarios)")
+    # a folder named like a built-in (the output of `run pack-field --out pack-field`) does
+    # not hide the built-in
+    (tmp_path / "demo-small").mkdir()
+    assert load_scenario("demo-small").name == "demo-small"
 
 
 def test_a_missing_file_says_so_and_names_a_close_one(tmp_path, monkeypatch):

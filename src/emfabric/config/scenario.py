@@ -1796,7 +1796,10 @@ def load_scenario(source: str | Path, overrides: dict[str, Any] | None = None) -
     An empty file is the built-in defaults (the paper's field-on case) with a warning: it
     is rarely what was meant."""
     path = Path(source)
-    if path.suffix == ".toml" or path.exists():
+    # a folder named like a built-in (`emfabric run pack-field --out pack-field`, then the same
+    # command again) does not hide the built-in: a folder is never a scenario
+    builtin_folder = path.is_dir() and str(source) in builtin_names()
+    if path.suffix == ".toml" or (path.exists() and not builtin_folder):
         if not path.is_file():
             raise ScenarioError(_no_file(path))
         raw = path.read_bytes()
