@@ -288,6 +288,24 @@ def test_v50_of_shots_that_separate_is_the_gap():
     assert 81.11 < fit["v50"] < 91.25
 
 
+def test_a_v_bl_outside_the_seeded_interval_is_pointed_out():
+    """The rupture scenario in the field (docs/studies.md): the bisection's 69.8 m/s against
+    V50 = 56.3 m/s, 95 % [46.8, 60.2]: the user is told to quote V50; inside the interval, or
+    without seeds, nothing is said."""
+    from emfabric.studies.ballistic import v_bl_outside_v50
+
+    v50 = {"v50": 56.3, "ci95": [46.8, 60.2], "sigma": 5.9, "separated": False}
+    note = v_bl_outside_v50({"v_bl": 69.8, "v50": v50})
+    assert note is not None and "69.8 m/s" in note and "[46.8, 60.2]" in note
+    assert "quote V50 = 56.3 m/s" in note
+    assert v_bl_outside_v50({"v_bl": 58.0, "v50": v50}) is None
+    assert v_bl_outside_v50({"v_bl": 69.8}) is None
+    # separated shots: the interval is the gap
+    gap = {"v50": 88.7, "ci95": [86.18, 91.25], "sigma": 0.0, "separated": True}
+    assert v_bl_outside_v50({"v_bl": 88.0, "v50": gap}) is None
+    assert "outside" in v_bl_outside_v50({"v_bl": 95.0, "v50": gap})
+
+
 def _fake_fire(threshold):
     """A `fire` for studies.ballistic.seeded_shots that runs nothing: a shot perforates when
     faster than `threshold` (None: every shot perforates); it records every batch fired."""

@@ -279,7 +279,7 @@ def ballistic_limit(
     """V_BL of the model by bracketing and bisecting the striking speed, the Lambert-Jonas fit
     of the residual speeds above it, and with --seeds, V50 and its spread (runs on Dask)."""
     from emfabric.studies.ballistic import ballistic_limit as search
-    from emfabric.studies.ballistic import write_outputs
+    from emfabric.studies.ballistic import v_bl_outside_v50, write_outputs
     from emfabric.studies.sweep import StudyError
 
     sc = load_or_exit(scenario, set_)
@@ -321,6 +321,9 @@ def ballistic_limit(
                           f"above V_BL = {res['v_bl']:.4g} m/s")
                       + " (the limit is not sharp here: see ballistic.png; --seeds gives V50)",
                       highlight=False, soft_wrap=True)
+    note = v_bl_outside_v50(res)
+    if note:
+        console.print(f"[yellow]note:[/] {note}", highlight=False, soft_wrap=True)
     if json_summary:
         keep = ("v_bl", "v_bl_bracket", "lambert_jonas", "v50", "runs", "non_monotone")
         emit(jsontext.dumps({k: res[k] for k in keep if k in res}))

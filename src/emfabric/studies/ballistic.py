@@ -295,6 +295,23 @@ def seeded_shots(fire, scenario: Scenario, v_bl: float,
                      "a V50 needs shots of both outcomes")
 
 
+def v_bl_outside_v50(res: dict[str, Any]) -> str | None:
+    """What to tell a user whose deterministic V_BL lies outside the 95 % interval of the seeded
+    V50 (or outside the gap where the seeded shots separate), else None: there the bisection's
+    single number is one draw of what the scatter of the yarns and the impact point decide, and
+    V50 is the limit to quote (docs/studies.md, "The step and the ballistic limit")."""
+    fit = res.get("v50")
+    if not fit:
+        return None
+    lo, hi = fit["ci95"]
+    v_bl = res["v_bl"]
+    if not (math.isfinite(lo) and math.isfinite(hi)) or lo <= v_bl <= hi:
+        return None
+    return (f"V_BL by bisection ({v_bl:.4g} m/s) lies outside the seeded V50's 95 % interval "
+            f"[{lo:.4g}, {hi:.4g}] m/s: the deterministic shots are one draw of the yarns' "
+            f"scatter and the impact point; quote V50 = {fit['v50']:.4g} m/s with its spread")
+
+
 def non_monotone(shots: list[dict[str, Any]], v_bl: float) -> list[dict[str, Any]]:
     """The outcomes of the scenario as given (seeded shots scatter by design: left out) that a
     sharp ballistic limit cannot explain: each stopped shot faster than a perforating one, as
