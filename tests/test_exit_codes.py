@@ -276,3 +276,39 @@ def test_study_search_errors(tmp_path, monkeypatch, command, when, code):
     else:
         assert lines[0] == "error: no bracket"
     assert not (tmp_path / "out" / ".emfabric.lock").exists()
+
+
+def test_a_v50_not_found_keeps_v_bl_and_exits_1(tmp_path, monkeypatch):
+    """`ballistic-limit --seeds` whose seeded shots never bring both outcomes: the V_BL found
+    and every shot are written (ballistic.json, .nc, .png), then exit 1 with the reason on one
+    line. (The search is a stand-in returning what studies.ballistic returns then.)"""
+    from typer.testing import CliRunner
+
+    import emfabric.studies.ballistic as ballistic
+    from emfabric.cli import app
+
+    why = ("V50: every one of the 66 decided seeded shots from 23.7 to 120 m/s perforated, the "
+           "deterministic V_BL being 100 m/s; a V50 needs shots of both outcomes")
+
+    def search(*args, progress=None, **kwargs):
+        progress(1)
+        shots = [{"speed": v, "seed": None, "perforated": int(v > 99.0), "residual_speed":
+                  max(v - 99.0, 0.0), "status": "complete", "key": f"k{v}"}
+                 for v in (50.0, 98.0, 100.0, 105.0, 110.0, 120.0, 135.0)]
+        return {"v_bl": 99.0, "v_bl_bracket": [98.0, 100.0], "tolerance": 2.0,
+                "lambert_jonas": {"a": 1.0, "p": 2.0, "v_bl": 99.0, "rms_residual": 0.0},
+                "seeds": 2, "v50_error": why, "shots": shots, "runs": len(shots),
+                "scenario": "rupture", "non_monotone": []}
+
+    monkeypatch.setattr(ballistic, "ballistic_limit", search)
+    out = tmp_path / "out"
+    r = CliRunner().invoke(app, ["ballistic-limit", "rupture", "--seeds", "2", "--out",
+                                 str(out)], env={"COLUMNS": "400"})
+    assert r.exit_code == 1, r.output
+    lines = [line for line in r.output.splitlines()
+             if line.strip() and not line.startswith("warning: ")]
+    assert lines == [f"error: {why} (V_BL and every shot are in {out})"], r.output
+    res = json.loads((out / "ballistic.json").read_text())
+    assert res["v_bl"] == 99.0 and "v50" not in res and res["v50_error"] == why
+    assert (out / "ballistic.nc").is_file() and (out / "ballistic.png").is_file()
+    assert not (out / ".emfabric.lock").exists()
