@@ -17,7 +17,7 @@ docs/theory.md §4.1 ("Where the energy comes from"). Three measurements:
    the step matrix, which is 0 (round-off) for a scheme that neither gains nor loses.
 With --phi, the ringing sheet also under the φ-scheme at its defaults (B = 0 and B).
 
-    python scripts/ring_energy.py                      # courant 0.5 0.4 0.3 0.25, ~5 min
+    python scripts/ring_energy.py                      # courant 0.5 0.4 0.3 0.25, ~2 min
     python scripts/ring_energy.py --courant 0.5 0.25 --end-time 3e-4 --phi
 """
 
