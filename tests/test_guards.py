@@ -93,12 +93,23 @@ def test_sighup_keeps_a_readable_partial_history(tmp_path):
            "--set=solver.end_time=5e-3", "--set=projectile.velocity=[0,0,0]",
            "--set=output.checkpoint_seconds=0.05"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    # the signal comes once the checkpoint has been replaced at least once after its first
+    # write, so that the run has recorded more than its first step whatever the machine's load
+    # (a fixed 0.3 s after the first write was not always enough beside other jobs)
     deadline = time.monotonic() + 300
+    first = None
     while proc.poll() is None and time.monotonic() < deadline:
-        if (out / "checkpoint.nc").exists():
-            time.sleep(0.3)
-            os.kill(proc.pid, signal.SIGHUP)
-            break
+        try:
+            st = os.stat(out / "checkpoint.nc")
+        except FileNotFoundError:
+            st = None
+        if st is not None:
+            stamp = (st.st_ino, st.st_mtime_ns)
+            if first is None:
+                first = stamp
+            elif stamp != first:
+                os.kill(proc.pid, signal.SIGHUP)
+                break
         time.sleep(0.01)
     _out, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
