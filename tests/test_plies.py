@@ -398,3 +398,50 @@ def test_a_ply_pressed_onto_the_next_by_a_field(integrator, pull):
         np.testing.assert_allclose(v[1, :4], q * (pull - mu_d * ez / 2) * t / m, rtol=1e-2)
     assert res.status == "complete"
     assert abs(float(h.energy_balance_error[-1])) < 1e-9 * float(h.work_field[-1])
+
+
+def test_the_projectile_brings_the_pack_below_to_its_speed_within_one_step():
+    """Three free rigid 2 × 2 plies, overlapping by a tenth of the contact distance d: the top
+    ply's nodes held by the projectile (State.contact[3]), moving down at V, the two below at
+    rest. A held node acts as one of infinite mass, so the sweeps of one step bring both plies
+    below to −V along the normal (closed form of the converged stick/inelastic impulses), and
+    the held nodes take the whole −J once the sweeps end: +2V each, since the plies below gained
+    8 m V and the pack's momentum is exact. With the held nodes' −J applied after each sweep,
+    they slowed and parted from the ply below after the first one, which left plies 2 and 3
+    at −V/2 (and the push went on a step later; docs/theory.md §5.1)."""
+    from emfabric._kernels.plies import ply_contact
+    from emfabric.integrators import make_integrator
+    from emfabric.sim.state import initial_state
+
+    sc = make(**{"fabric.nodes": [2, 2], "fabric.size": [0.002, 0.002], "fabric.plies": 3,
+                 "fabric.rescale": False, "fabric.edges": "free", "fabric.damage.rate": 0.0,
+                 "fabric.material.modulus_cv": 0.0, "fabric.charge_per_node": 0.0,
+                 "field.B": [0, 0, 0], "field.E": [0, 0, 0], "projectile.shape": "none",
+                 "solver.integrator": "central-difference"})
+    model = build_model(sc)
+    integ = make_integrator(model)
+    state = initial_state(model)
+    phys, nodes = integ.physics, model.nodes
+    gap = float(phys.contact.ply_gap.min())
+    m = float(nodes.mass[0])
+    assert np.all(nodes.mass == m)
+    x, v = state.arrays.x.copy(), state.arrays.v.copy()
+    top, mid, low = (slice(nodes.ply_nodes[p], nodes.ply_nodes[p + 1]) for p in range(3))
+    x[2, top] -= 0.1 * gap
+    x[2, low] += 0.1 * gap
+    speed = 100.0
+    v[2, top] = -speed
+    held = np.zeros(model.node_count)
+    held[top] = 1.0
+    p0 = m * v.sum(axis=1)
+    ply_contact(phys, state.arrays, x, v, integ.work, 1e-8, held)
+    np.testing.assert_allclose(v[2, mid], -speed, rtol=0.05)
+    np.testing.assert_allclose(v[2, low], -speed, rtol=0.05)
+    np.testing.assert_allclose(v[:2], 0.0, atol=1e-9 * speed)
+    np.testing.assert_allclose(m * v.sum(axis=1), p0, atol=1e-12 * m * speed)
+    # the held nodes took what the plies below gained, once
+    gained = float(v[2, mid].mean() + v[2, low].mean())
+    np.testing.assert_allclose(v[2, top], -speed - gained, rtol=1e-9)
+    # no ply passes through the next: every gap opened to the contact distance
+    assert float(x[2, top].min() - x[2, mid].max()) >= 0.99 * gap
+    assert float(x[2, mid].min() - x[2, low].max()) >= 0.99 * gap

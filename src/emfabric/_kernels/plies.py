@@ -132,9 +132,11 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, pen
     nearest master node, written where the walk finds it; shares: scratch, (2, box count):
     each box node's w and gap; boxes = (box, hot): master's _region, and the nodes to meet
     (below); penalty = (stiffness, φΔt, start-of-step
-    velocities, driven): a stiffness > 0 takes the φ-scheme's penalty law instead
+    velocities, driven, place): a stiffness > 0 takes the φ-scheme's penalty law instead
     (ply_forces): forces into acc[0], nothing into acc[1]; driven (node_count,) or empty:
-    nonzero for the nodes the projectile drives (central differences: ply_contact).
+    nonzero for the nodes the projectile drives (central differences: ply_contact); place:
+    False gives the impulses alone, no placements (ply_contact's sweeps once the placements
+    have converged: PLY_VELOCITY_SWEEPS).
     With hot[0] ≠ 0, only the slave nodes in slave's grid box hot[1:5] (i_lo, i_hi, j_lo,
     j_hi), or whose nearest master node (near) lies within one box (Contact.ply_box) plus one
     node of master's grid box hot[5:9], are met: the nodes ply_contact's later sweeps revisit.
@@ -158,7 +160,7 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, pen
     wide = 2 * bi + 1
     qi, qx, qf = 1.0 / law.ply_quantum[0], 1.0 / law.ply_quantum[1], 1.0 / law.ply_quantum[2]
     gap = law.ply_gap[min(master, slave)]
-    stiff, phi_dt, v_start, driven = penalty
+    stiff, phi_dt, v_start, driven, place = penalty
     forces = stiff > 0.0
     steered = driven.shape[0] > 0
     s0 = nodes.ply_nodes[slave]
@@ -280,6 +282,8 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, pen
                     units = _units(share * j[c], qi)
                     acc[0, c, n] += units
                     acc[0, c, km] -= units
+                    if not place:
+                        continue
                     units = _units(lift * nh[c], qx)
                     if move_n:
                         acc[1, c, n] += units
@@ -318,7 +322,7 @@ def _all_pairs(phys, x, v, nrm, acc, phi_dt, v_start, near):
         _normals(nodes, p, x, nrm, region[p])
     every = np.zeros(9, dtype=np.int64)
     for p in range(plies - 1):
-        law_p = (law.ply_stiffness[p], phi_dt, v_start, np.empty(0))
+        law_p = (law.ply_stiffness[p], phi_dt, v_start, np.empty(0), True)
         _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, (law.ply_guess[0], near), shares,
               (region[p], every), law_p)
         _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, (law.ply_guess[1], near), shares,
@@ -378,10 +382,12 @@ def _apply(phys, sin, x, v, acc, lag, span, flag, nf, mark):
     see, Δx − lag·Δv [J]: the contact placement's term of the energy budget, for the nodes with
     flag 0 (a projectile contact candidate's is booked by the kick that follows, with the
     projectile's placement); the largest placement of a node along an axis [m]). lo..hi − 1 are
-    the nodes of plies p and p + 1, mark = (hot, p, tol): the grid box of each ply's nodes that
-    changed by more than tol — placed, or their velocity changed by Δv with 2·lag·|Δv| (the
-    step's drift of it), along an axis — is widened to hold them (hot, (plies, 4): i_lo, i_hi,
-    j_lo, j_hi).
+    the nodes of plies p and p + 1, mark = (hot, p, tol, vtol, driven): the grid box of each
+    ply's nodes that changed by more than the tolerances — placed by more than tol, or their
+    velocity changed by Δv with 2·lag·|Δv| (the step's drift of it) more than vtol, along an
+    axis — is widened to hold them (hot, (plies, 4): i_lo, i_hi, j_lo, j_hi). Nodes with
+    driven ≠ 0 are left as they are, their impulses kept in acc (_apply_driven). Returns also
+    the largest 2·lag·|Δv| [m].
 
     The yarn force only: the electric field's and gravity's work are booked from the kicks'
     velocities, which see no placement (nodes._drift_block, _kick_block), and the magnetic
@@ -389,20 +395,24 @@ def _apply(phys, sin, x, v, acc, lag, span, flag, nf, mark):
     step twice (tests/test_plies.py)."""
     nodes, law = phys.nodes, phys.contact
     lo, hi = span
-    hot, p, tol = mark
+    hot, p, tol, vtol, driven = mark
     qi, qx = law.ply_quantum[0], law.ply_quantum[1]
     inv_mass, mass = nodes.inv_mass, nodes.mass
+    steered = driven.shape[0] > 0
     lost = 0.0
     work = 0.0
     moved = 0.0
+    sped = 0.0
     for n in range(lo, hi):
+        if steered and driven[n] != 0.0:
+            continue  # its impulses wait in acc until the sweeps end (_apply_driven)
         if (acc[0, 0, n] == 0 and acc[0, 1, n] == 0 and acc[0, 2, n] == 0
                 and acc[1, 0, n] == 0 and acc[1, 1, n] == 0 and acc[1, 2, n] == 0):
             continue
         im = inv_mass[n]
         fy = _yarn_force(phys, sin, nf, n)
         mine = 0.0
-        change = 0.0
+        kick = 0.0
         for c in range(3):
             dv = float(acc[0, c, n]) * qi * im
             dx = float(acc[1, c, n]) * qx * im
@@ -410,13 +420,14 @@ def _apply(phys, sin, x, v, acc, lag, span, flag, nf, mark):
             if flag[n] == 0:
                 work += fy[c] * (dx - lag * dv)
             mine = max(mine, abs(dx))
-            change = max(change, abs(dx), 2.0 * lag * abs(dv))
+            kick = max(kick, 2.0 * lag * abs(dv))
             v[c, n] += dv
             x[c, n] += dx
             acc[0, c, n] = 0
             acc[1, c, n] = 0
         moved = max(moved, mine)
-        if change > tol:
+        sped = max(sped, kick)
+        if mine > tol or kick > vtol:
             q = p if n < nodes.ply_nodes[p + 1] else p + 1
             local = n - nodes.ply_nodes[q]
             nx = nodes.rows[nodes.ply_rows[q], ROW_COUNT]
@@ -426,24 +437,66 @@ def _apply(phys, sin, x, v, acc, lag, span, flag, nf, mark):
             hot[q, 1] = max(hot[q, 1], i)
             hot[q, 2] = min(hot[q, 2], j)
             hot[q, 3] = max(hot[q, 3], j)
-    return lost, work, moved
+    return lost, work, moved, sped
+
+
+@njit(cache=True)
+def _apply_driven(phys, x, v, acc, driven):
+    """Apply the impulses the sweeps gave the nodes the projectile drives (held in acc while
+    the sweeps ran: a held node moves with the projectile, a boundary the pack below is brought
+    to within the step) and clear them. Returns the kinetic energy they took [J]."""
+    nodes, law = phys.nodes, phys.contact
+    qi = law.ply_quantum[0]
+    lost = 0.0
+    for n in range(x.shape[1]):
+        if driven[n] == 0.0:
+            continue
+        im = nodes.inv_mass[n]
+        for c in range(3):
+            dv = float(acc[0, c, n]) * qi * im
+            lost -= nodes.mass[n] * (v[c, n] * dv + 0.5 * dv * dv)
+            v[c, n] += dv
+            acc[0, c, n] = 0
+            acc[1, c, n] = 0
+    return lost
 
 
 PLY_SWEEPS = 32
 """Central differences' ply contact: the most sweeps over the pack's pairs in one step (down,
-up, …). Where the plies fold sharply (the rim of a sphere on a 16-ply pack, the FSP of
-pack-fsp) nodes are passed back and forth without end and the sweeps run to this limit, so
-it is a resolution: pack-fsp's ω_x at 12 µs with 8 / 16 / 32 / 64 sweeps is −3872 / −3775 /
-−3723 / −3692 rad/s. The limit was 8 (5 % from 64 sweeps); 32 is 0.8 %, and with the later
-sweeps meeting only the nodes that changed it costs about half what 8 sweeps of every node did
-(docs/theory.md §5.1). With 4, the second gap of pack-fsp at 21 × 21 closed to zero at the
-default step (scripts/ply_gaps.py)."""
+up, …) that place nodes (PLY_VELOCITY_SWEEPS more may follow that do not). Where the plies
+fold sharply (the rim of a sphere on a 16-ply pack, the FSP of pack-fsp) nodes are passed
+back and forth without end and the sweeps run to this limit, so it is a resolution:
+pack-fsp's ω_x at 12 µs with 8 / 16 / 32 / 64 sweeps is −3872 / −3775 / −3723 / −3692 rad/s.
+The limit was 8 (5 % from 64 sweeps); 32 is 0.8 %, and with the later sweeps meeting only the
+nodes that changed it costs about half what 8 sweeps of every node did (docs/theory.md
+§5.1). With 4, the second gap of pack-fsp at 21 × 21 closed to zero at the default step
+(scripts/ply_gaps.py)."""
 PLY_TOLERANCE = 0.01
 """Central differences' ply contact sweeps until no node is placed by more than this fraction of
-the contact distance (Contact.ply_gap) along any axis in a sweep. (Not until no pair overlaps:
-a node under a sharp fold of the ply above meets tangent planes that no placement satisfies at
-once, and its overlap with the tilted ones, up to ≈ d(1 − cos θ), stays while the placements
-that balance it are tiny.)"""
+the contact distance (Contact.ply_gap) along any axis in a sweep (and PLY_VELOCITY_TOLERANCE
+holds). (Not until no pair overlaps: a node under a sharp fold of the ply above meets tangent
+planes that no placement satisfies at once, and its overlap with the tilted ones, up to
+≈ d(1 − cos θ), stays while the placements that balance it are tiny.)"""
+PLY_VELOCITY_SWEEPS = 8
+"""Central differences' ply contact: once the placements have converged (a sweep placed no node
+by more than PLY_TOLERANCE) or PLY_SWEEPS sweeps have placed, at most this many more sweeps
+give impulses alone, on the geometry as it is, until PLY_VELOCITY_TOLERANCE holds. Placing on,
+the placements cycle at a sharp fold: a node of pack-field's second ply beside the sphere's
+axis was moved 1.6e-7 m back and forth every sweep (4e-4 of the contact distance, below
+PLY_TOLERANCE: the overlap it leaves is no larger), and the impulses, whose pairs came and
+went with it, changed by ~2 % of the first sweep's every sweep without end. Without
+placements they fall to ~3.5 % of it in 40 sweeps and slowly after (a node meets nine nodes
+of the other ply, each a pair: docs/theory.md §5.1); pack-field's ω_x at 100 µs with 8 / 32 /
+64 such sweeps: −461 / −457 / −453 rad/s."""
+PLY_VELOCITY_TOLERANCE = 0.01
+"""... and until no node's velocity changes in a sweep by more than this fraction of the largest
+change of the step's first sweep (along any axis). A tolerance on the placements alone stopped
+after one sweep wherever the plies move slowly relative to each other, since a step's overlaps
+are then below PLY_TOLERANCE · d: at courant 0.125 every step of pack-field's first 100 µs had
+one sweep, at 0.25 one to three, so the impulses down the pack were resolved one pair a step
+and the pack's spin moved with the step (ω_x at 100 µs −434 / −456 rad/s at courant 0.25 /
+0.125; docs/theory.md §5.1). Relative to the step's own first sweep, the velocities are
+resolved to the same fraction at any step."""
 
 
 @njit(cache=True)
@@ -457,18 +510,24 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
     (State.contact[3] after its contact).
     Returns (dissipation [J], placement work [J]); (0, 0) for one ply.
 
-    Gauss–Seidel over the pairs: each pair's impulses and placements are applied before the
-    next pair is met, downwards through the pack (pair 1–2 first) and upwards on the next
-    sweep, until a sweep places no node by more than PLY_TOLERANCE of the contact distance (at
-    most PLY_SWEEPS sweeps; a pair that placed no node by more than that when it was last met,
-    nor did its neighbouring pairs, is not met again). The first sweep meets every node; the
-    later ones only the nodes near those that changed by more than the tolerance since their
-    pair was met (_apply's hot boxes, _pass): elsewhere a pass would give the same impulses
-    and placements within it. Under a projectile the sweeps rarely converge (a sharp fold), and
-    the first sweep costs what every sweep cost before: a pack's ply contact now costs about
-    as much with 32 sweeps as it did with 8 (docs/theory.md §5.1). A node the projectile
-    drives acts as one of infinite mass (_pass): the projectile put it on its surface, and the
-    pack below is placed against it.
+    Gauss–Seidel over the pairs: each pair's impulses and placements are applied before the next
+    pair is met, downwards through the pack (pair 1–2 first) and upwards on the next sweep,
+    until a sweep places no node by more than PLY_TOLERANCE of the contact distance and changes
+    no node's velocity by more than PLY_VELOCITY_TOLERANCE of the first sweep's largest change
+    (at most PLY_SWEEPS sweeps that place, until the placements converge, and then at most
+    PLY_VELOCITY_SWEEPS that give impulses alone; a pair none of whose plies' nodes changed by
+    more than the tolerances since it was last met is not met again). The first sweep meets
+    every node; the later ones only the nodes near those that changed by more than the
+    tolerances since their pair was met (_apply's hot boxes, _pass): elsewhere a pass would give
+    the same impulses and placements within them. Under a projectile the sweeps rarely converge
+    (a sharp fold), and the first sweep costs what every sweep cost before: a pack's ply contact
+    now costs about as much with 32 sweeps as it did with 8 (docs/theory.md §5.1). A node the
+    projectile drives acts as one of infinite mass (_pass): the projectile put it on its
+    surface, and the pack below is placed against it. Its velocity stays as the projectile left
+    it until the sweeps end, and only then takes the −J its pairs gave it (_apply_driven; the
+    projectile's next contact brings it back to the surface): applied sweep by sweep, it slowed
+    by its first −J/m and then parted from the node below, so the projectile pushed the pack
+    through it once a step, and the push reached down the pack as fast as the steps came.
     One simultaneous (Jacobi) pass per step with shared placements, before the projectile's
     contact, let the upper plies of an 8-ply pack under an FSP's flat face close their gaps
     (docs/theory.md §5.1). The order is fixed, so the numbers are the same for any thread
@@ -484,16 +543,16 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
     region = np.empty((2, 4), dtype=np.int64)
     lost = 0.0
     placed = 0.0
-    # the largest placement of each pair when it was last met: a pair whose own and whose
-    # neighbours' last placements were all within the tolerance is not met again
-    busy = np.full(plies - 1, math.inf)
+    vtol = 0.0  # the velocity tolerance, set by the first sweep
     # per ply, the grid box of its nodes that changed by more than tol (_apply) in the previous
     # sweep (rows 0..plies − 1) and in this one (rows plies..): the later sweeps meet only the
     # nodes near them (_pass's hot boxes)
     hot = np.empty((2 * plies, 4), dtype=np.int64)
     _clear_boxes(hot, 0, 2 * plies)
     box = np.zeros(9, dtype=np.int64)
-    for sweep in range(PLY_SWEEPS):
+    placing = True
+    velocity_sweeps = 0
+    for sweep in range(PLY_SWEEPS + PLY_VELOCITY_SWEEPS):
         if sweep > 0:
             for r in range(plies):
                 for c in range(4):
@@ -501,23 +560,24 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
             _clear_boxes(hot, plies, 2 * plies)
         box[0] = 1 if sweep > 0 else 0
         moved = 0.0
+        sped = 0.0
         for q in range(plies - 1):
             p = q if sweep % 2 == 0 else plies - 2 - q
-            near = max(busy[p], busy[max(p - 1, 0)], busy[min(p + 1, plies - 2)])
-            if near <= tol:
-                continue
             if sweep > 0:
                 # since this pair was met: where its plies' nodes changed in the last sweep
-                # and so far in this one
+                # and so far in this one (none: the pair is not met again). A pair whose
+                # neighbours' last changes were within the tolerances was once skipped as
+                # well, but a neighbour met again since could have changed this pair's
+                # plies before and nothing after: a sweep then stopped with the pair below a
+                # held ply at half its speed (tests/test_plies.py)
                 lo = _hot_union(hot, plies, p, box, 5)
                 up = _hot_union(hot, plies, p + 1, box, 1)
                 if not (lo or up):
-                    busy[p] = 0.0
                     continue
             for s in range(2):
                 _region(nodes, p + s, x, region[s])
                 _normals(nodes, p + s, x, nrm, region[s])
-            law_p = (0.0, 0.0, v, driven)
+            law_p = (0.0, 0.0, v, driven, placing)
             _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, (law.ply_guess[0], work.ply_near[0]),
                   shares, (region[0], box), law_p)
             if sweep > 0:  # the other way round: ply p is the slave
@@ -525,15 +585,28 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
                     box[1 + c], box[5 + c] = box[5 + c], box[1 + c]
             _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, (law.ply_guess[1], work.ply_near[1]),
                   shares, (region[1], box), law_p)
-            d_lost, d_placed, d_moved = _apply(phys, sin, x, v, acc, lag,
-                                               (nodes.ply_nodes[p], nodes.ply_nodes[p + 2]),
-                                               work.flag, work.node_field, (hot[plies:], p, tol))
+            d_lost, d_placed, d_moved, d_sped = _apply(
+                phys, sin, x, v, acc, lag, (nodes.ply_nodes[p], nodes.ply_nodes[p + 2]),
+                work.flag, work.node_field, (hot[plies:], p, tol, vtol, driven))
             lost += d_lost
             placed += d_placed
             moved = max(moved, d_moved)
-            busy[p] = d_moved
-        if moved <= tol:
+            sped = max(sped, d_sped)
+        if sweep == 0:
+            vtol = PLY_VELOCITY_TOLERANCE * sped
+        if moved <= tol and sped <= vtol:
             break
+        if placing:
+            # the placements have converged (or reached PLY_SWEEPS): the later sweeps resolve
+            # the velocities on the geometry as it is (PLY_VELOCITY_SWEEPS)
+            if moved <= tol or sweep + 1 >= PLY_SWEEPS:
+                placing = False
+        else:
+            velocity_sweeps += 1
+            if velocity_sweeps >= PLY_VELOCITY_SWEEPS:
+                break
+    if driven.shape[0] > 0:
+        lost += _apply_driven(phys, x, v, acc, driven)
     return lost, placed
 
 
