@@ -487,16 +487,18 @@ PLY_TOLERANCE: the overlap it leaves is no larger), and the impulses, whose pair
 went with it, changed by ~2 % of the first sweep's every sweep without end. Without
 placements they fall to ~3.5 % of it in 40 sweeps and slowly after (a node meets nine nodes
 of the other ply, each a pair: docs/theory.md §5.1); pack-field's ω_x at 100 µs with 8 / 32 /
-64 such sweeps: −461 / −457 / −453 rad/s."""
+64 such sweeps: −461 / −457 / −453 rad/s, and with 2 / 4 / 8: −453 / −458 / −460 (worktree runs,
+the first three before the pair skip was removed); the whole pack-field run costs 3.9 × what
+it did with none (docs/packs.md)."""
 PLY_VELOCITY_TOLERANCE = 0.01
-"""... and until no node's velocity changes in a sweep by more than this fraction of the largest
-change of the step's first sweep (along any axis). A tolerance on the placements alone stopped
-after one sweep wherever the plies move slowly relative to each other, since a step's overlaps
-are then below PLY_TOLERANCE · d: at courant 0.125 every step of pack-field's first 100 µs had
-one sweep, at 0.25 one to three, so the impulses down the pack were resolved one pair a step
-and the pack's spin moved with the step (ω_x at 100 µs −434 / −456 rad/s at courant 0.25 /
-0.125; docs/theory.md §5.1). Relative to the step's own first sweep, the velocities are
-resolved to the same fraction at any step."""
+"""Central differences' ply contact sweeps also until no node's velocity changes in a sweep by more
+than this fraction of the largest change of the step's first sweep (along any axis). A tolerance
+on the placements alone stopped after one sweep wherever the plies move slowly relative to each
+other, since a step's overlaps are then below PLY_TOLERANCE · d: at courant 0.125 every step of
+pack-field's first 100 µs had one sweep, at 0.25 one to three, so the impulses down the pack
+were resolved one pair a step and the pack's spin moved with the step (ω_x at 100 µs −434 / −456
+rad/s at courant 0.25 / 0.125; docs/theory.md §5.1). Relative to the step's own first sweep, the
+velocities are resolved to the same fraction at any step."""
 
 
 @njit(cache=True)
