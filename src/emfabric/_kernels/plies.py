@@ -546,7 +546,8 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
     lost = 0.0
     placed = 0.0
     vtol = 0.0  # the velocity tolerance, set by the first sweep
-    # per ply, the grid box of its nodes that changed by more than tol (_apply) in the previous
+    # per ply, the grid box of its nodes that changed by more than the tolerances (tol for a
+    # placement, vtol for Δt|Δv|: _apply; in the first sweep any Δv) in the previous
     # sweep (rows 0..plies − 1) and in this one (rows plies..): the later sweeps meet only the
     # nodes near them (_pass's hot boxes)
     hot = np.empty((2 * plies, 4), dtype=np.int64)
