@@ -522,14 +522,15 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
     every node; the later ones only the nodes near those that changed by more than the
     tolerances since their pair was met (_apply's hot boxes, _pass): elsewhere a pass would give
     the same impulses and placements within them. Under a projectile the sweeps rarely converge
-    (a sharp fold), and the first sweep costs what every sweep cost before: a pack's ply contact
-    now costs about as much with 32 sweeps as it did with 8 (docs/theory.md §5.1). A node the
-    projectile drives acts as one of infinite mass (_pass): the projectile put it on its
-    surface, and the pack below is placed against it. Its velocity stays as the projectile left
-    it until the sweeps end, and only then takes the −J its pairs gave it (_apply_driven; the
-    projectile's next contact brings it back to the surface): applied sweep by sweep, it slowed
-    by its first −J/m and then parted from the node below, so the projectile pushed the pack
-    through it once a step, and the push reached down the pack as fast as the steps came.
+    (a sharp fold), and the first sweep costs what every sweep cost before; the sweeps of
+    impulses alone made the whole pack-field run 3.9 × as long (docs/packs.md, docs/theory.md
+    §5.1). A node the projectile drives acts as one of infinite mass (_pass): the projectile put
+    it on its surface, and the pack below is placed against it. Its velocity stays as the
+    projectile left it until the sweeps end, and only then takes the −J its pairs gave it
+    (_apply_driven; the projectile's next contact brings it back to the surface): applied sweep
+    by sweep, it slowed by its first −J/m and then parted from the node below, so the projectile
+    pushed the pack through it once a step, and the push reached down the pack as fast as the
+    steps came.
     One simultaneous (Jacobi) pass per step with shared placements, before the projectile's
     contact, let the upper plies of an 8-ply pack under an FSP's flat face close their gaps
     (docs/theory.md §5.1). The order is fixed, so the numbers are the same for any thread
