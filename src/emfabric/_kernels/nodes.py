@@ -16,6 +16,14 @@ turn and kick, with the row sums the step needs (records.SUM_*).
 The kernels walk the plies' regular weaves row by row (the layout of emfabric._kernels.records): the
 tensions of a row never leave the cache. Each has a serial and a row-block threaded form with
 the same arithmetic.
+
+The functions called once per row or row block (_tensions, _block_start, _row_block,
+_drift_block, _kick_block) are compiled with `_nrt=False`, without Numba's reference counting:
+with it, every call references and releases each array of its arguments on entry and exit (the
+records hold ~90), an atomic operation each: `NRT_incref`/`NRT_decref` were 10.4 % of a
+paper-field step, and are 1.9 % without them (`perf`, benchmarks/profile_step.py). They
+allocate no array and return none, so the references their callers hold are enough; Numba
+refuses to compile one that would need the counts.
 """
 
 import math
@@ -195,7 +203,7 @@ def _segment_stats(buf, s, coef, rest2, mat, count):
     return u2max, _buf_total(buf, ROW_SEGMENT_ENERGY, count), broken, amin
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _tensions(x, span, rest, alpha, damage_thr, coef, mat, buf, out, mode, visc):
     """Tension vectors of `count` segments into buf[r:r + 3, c:c + count], out = (r, c), and
     with mode & TANGENT their axial tangent stiffness α·stiffness·materials.tangent_factor
@@ -332,7 +340,7 @@ def _scaled_segments(buf, scale, r, col, count):
         buf[r + 2, o] = buf[scale, u] * buf[ROW_SEGMENT + 2, u]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _block_start(j0, phys, prev, sin, sout, work, buf, mode, dt):
     """Prepare a block's row buffer before its first row j0: zero the padding of the warp row
     and set the fill tensions (with mode & TANGENT their stiffness, with mode & VISCOUS their
@@ -440,7 +448,7 @@ def _row_force(j, arr, mat, uni, sourced, grav, prev, buf, ru, rd, mode, inv_dt)
     return (max(sw[0], sfl[0]), sw[1] + sfl[1], sw[2] + sfl[2], min(sw[3], sfl[3]))
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
     """Rows j0 ≤ j < j1 of the fused φ iterate: the force of each row (_row_force), consumed at
     once by the φ-update of its nodes (eqs. 3.2, A12–A13) and the error terms of eq. 3.10."""
@@ -702,7 +710,7 @@ def _buf_total(buf, r, count):
     return (s0 + s1) + (s2 + s3)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _drift_block(j0, j1, phys, sin, sout, work, t0, dt, buf):
     """Rows j0 ≤ j < j1 of the first half of a central-difference step (explicit.central_step):
     v⁻ = v + h/(2m) f (f without its magnetic part), v_{n+½} = v⁻ turned by B(x_n, t0) for h/2,
@@ -765,7 +773,7 @@ def _drift_block(j0, j1, phys, sin, sout, work, t0, dt, buf):
                 x1[c, k] = x0[c, k] + (dt if inv_mass[k] > 0.0 else 0.0) * w
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
     """Rows j0 ≤ j < j1 of the second half of a central-difference step: the force at sout.x
     and t1 (_row_force, trial damage from sin.alpha into sout.alpha: the step's one force

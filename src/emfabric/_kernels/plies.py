@@ -18,6 +18,10 @@ All pairs are computed from the same state and their impulses and mass-weighted 
 summed per node in integers (units Contact.ply_quantum): the sum does not depend on the order of
 the pairs, so a mirror-symmetric state stays mirror-symmetric to the bit, and the momentum the
 pairs exchange cancels exactly. Only then are they applied (_apply): Δv = ΣJ/m, Δx = Σ(mΔx)/m.
+
+The functions the sweeps call for every pair of plies (_region, _normals, _pass, _apply, and the
+box helpers) are compiled with `_nrt=False`, as the node kernels are (emfabric._kernels.nodes
+says why): their reference counts were 11.6 % of a pack-field step, and are gone.
 """
 
 import math
@@ -30,7 +34,7 @@ from emfabric._kernels.fields import magnetic_force, node_field_of, uniform_fiel
 from emfabric._kernels.records import ROW_COUNT
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _region(nodes, ply, x, out):
     """out[:] = (i_lo, i_hi, j_lo, j_hi): the grid box of ply `ply` outside which every node
     and its four grid neighbours are at their reference height (so its normal is exactly e_z):
@@ -56,7 +60,7 @@ def _region(nodes, ply, x, out):
         out[2], out[3] = max(jlo - 1, 0), min(jhi + 1, ny - 1)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _normals(nodes, ply, x, out, box):
     """The unit normal t_i × t_j of ply `ply`'s grid at each of its nodes n in the grid box
     `box` (_region) into out[:, n] (central differences along the grid's rows and columns,
@@ -124,7 +128,7 @@ def _dist2(x, a, b):
     return dx * dx + dy * dy + dz * dz
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, penalty):
     """The nodes of ply `slave` against the surface of ply `master` (normals nrm of master's
     nodes, times sign to point towards slave): impulses and placements into acc (integers).
@@ -374,7 +378,7 @@ def _yarn_force(phys, sin, nf, n):
             sin.f[2, n] - q * sin.e[2, n] - m * g[2] - fm[2])
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _apply(phys, sin, x, v, acc, lag, span, flag, nf, mark):
     """Apply the summed impulses and placements of nodes lo..hi − 1, span = (lo, hi) (and clear
     them). Returns (dissipation [J]: the kinetic energy the impulses took; the work of the yarn
@@ -440,7 +444,7 @@ def _apply(phys, sin, x, v, acc, lag, span, flag, nf, mark):
     return lost, work, moved, sped
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _apply_driven(phys, x, v, acc, driven):
     """Apply the impulses the sweeps gave the nodes the projectile drives (held in acc while
     the sweeps ran: a held node moves with the projectile, a boundary the pack below is brought
@@ -618,7 +622,7 @@ _FAR = 1 << 62
 """An empty hot box's lower bounds (_clear_boxes)."""
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _clear_boxes(hot, r0, r1):
     """Rows r0..r1 − 1 of ply_contact's hot boxes: empty (i_lo > i_hi)."""
     for r in range(r0, r1):
@@ -628,7 +632,7 @@ def _clear_boxes(hot, r0, r1):
         hot[r, 3] = -1
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _hot_union(hot, plies, ply, box, at):
     """box[at:at + 4] = the union of ply `ply`'s hot boxes of the last sweep and this one
     (ply_contact); returns whether it holds a node."""
