@@ -11,6 +11,8 @@ loaded from Numba's cache carry no names).
     perf report -i /tmp/step.data --sort sym
 
 (sampling the loop only: recording the whole process would be mostly the compile).
+`--set KEY=VALUE` changes the scenario as `emfabric run --set` does, e.g. `--set
+"fabric.nodes=[1000,1000]" --set output.snapshot_interval=1e-4` for a million nodes.
 
 benchmarks/PEER.md quotes what it found (Numba's reference counting, NRT_incref/NRT_decref,
 at 21 % of a step before the row functions were inlined). Load the machine with nothing else.
@@ -59,6 +61,9 @@ def main() -> None:
                     help="simulated time before the profiled calls [s] (default 3e-5)")
     ap.add_argument("--calls", type=int, default=20000,
                     help="step kernel calls (default 20000, ~10 s)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="a scenario override, as `emfabric run --set` (repeatable), e.g. "
+                         "--set fabric.nodes=[1000,1000]")
     args = ap.parse_args()
     if "EMFABRIC_PROFILE_CACHE" not in os.environ:
         # compile in this process (named functions): a fresh cache, then this script again
@@ -66,14 +71,15 @@ def main() -> None:
             env = dict(os.environ, NUMBA_CACHE_DIR=cache, EMFABRIC_PROFILE_CACHE="1")
             os.execve(sys.executable, [sys.executable, __file__, *sys.argv[1:]], env)
     from emfabric._kernels.explicit import central_step
-    from emfabric.config.scenario import load_scenario
+    from emfabric.config.scenario import load_scenario, parse_override
     from emfabric.integrators import make_integrator
     from emfabric.integrators.central import ROTATION_TOLERANCE, CentralDifference
     from emfabric.sim.builder import build_model
     from emfabric.sim.state import initial_state
 
-    model = build_model(load_scenario(args.scenario, {"solver.integrator":
-                                                      "central-difference"}))
+    overrides = dict(parse_override(text) for text in args.set)
+    model = build_model(load_scenario(args.scenario, {"solver.integrator": "central-difference",
+                                                      **overrides}))
     integ = make_integrator(model)
     assert isinstance(integ, CentralDifference)
     s = initial_state(model)

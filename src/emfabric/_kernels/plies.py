@@ -170,19 +170,29 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, pen
     s0 = nodes.ply_nodes[slave]
     snx = nodes.rows[nodes.ply_rows[slave], ROW_COUNT]
     only = hot[0] != 0
+    # the hot boxes' bounds, the master's widened by a box and one node; the master's rows
+    # as a range of node offsets, so that most nodes are passed over without a division
+    ri_lo, ri_hi = hot[5] - bi - 1, hot[6] + bi + 1
+    r_lo, r_hi = 1, 0  # an empty master box (bounds _FAR, −1): no node's nearest is in it
+    if hot[5] <= hot[6] and hot[7] <= hot[8]:
+        r_lo = max(hot[7] - bj - 1, 0) * mnx
+        r_hi = (hot[8] + bj + 2) * mnx
+    si = -1  # n's column and row in slave's grid, counted along
+    sj = 0
     for n in range(s0, nodes.ply_nodes[slave + 1]):
+        si += 1
+        if si == snx:
+            si = 0
+            sj += 1
         k = guess[n]
         if k < 0 or mass[n] == 0.0:
             continue
-        if only:
-            si = (n - s0) % snx
-            sj = (n - s0) // snx
-            kn = near[n] if near[n] >= 0 else k
-            ni = (kn - m0) % mnx
-            nj = (kn - m0) // mnx
-            if not ((hot[1] <= si <= hot[2] and hot[3] <= sj <= hot[4])
-                    or (hot[5] - bi - 1 <= ni <= hot[6] + bi + 1
-                        and hot[7] - bj - 1 <= nj <= hot[8] + bj + 1)):
+        if only and not (hot[1] <= si <= hot[2] and hot[3] <= sj <= hot[4]):
+            r = (near[n] if near[n] >= 0 else k) - m0
+            if r < r_lo or r >= r_hi:
+                continue
+            ni = r % mnx
+            if ni < ri_lo or ni > ri_hi:
                 continue
         ci = (k - m0) % mnx
         cj = (k - m0) // mnx
@@ -522,7 +532,9 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
     no node's velocity by more than PLY_VELOCITY_TOLERANCE of the first sweep's largest change
     (at most PLY_SWEEPS sweeps that place, until the placements converge, and then at most
     PLY_VELOCITY_SWEEPS that give impulses alone; a pair none of whose plies' nodes changed by
-    more than the tolerances since it was last met is not met again). The first sweep meets
+    more than the tolerances since it was last met is not met again). A ply's _region and
+    normals are computed again only after a sweep placed some of its nodes, so the sweeps of
+    impulses alone compute them once. The first sweep meets
     every node; the later ones only the nodes near those that changed by more than the
     tolerances since their pair was met (_apply's hot boxes, _pass): elsewhere a pass would give
     the same impulses and placements within them. Under a projectile the sweeps rarely converge
@@ -547,7 +559,10 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
     nrm = work.ply_normals
     tol = PLY_TOLERANCE * law.ply_gap.min()
     shares = _shares_buffer(law, plies)
-    region = np.empty((2, 4), dtype=np.int64)
+    # each ply's _region and normals, computed again only after its nodes were placed: the
+    # sweeps of impulses alone leave the positions, and so these, as they are
+    region = np.empty((plies, 4), dtype=np.int64)
+    stale = np.ones(plies, dtype=np.uint8)
     lost = 0.0
     placed = 0.0
     vtol = 0.0  # the velocity tolerance, set by the first sweep
@@ -583,19 +598,24 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
                 if not (lo or up):
                     continue
             for s in range(2):
-                _region(nodes, p + s, x, region[s])
-                _normals(nodes, p + s, x, nrm, region[s])
+                if stale[p + s]:
+                    _region(nodes, p + s, x, region[p + s])
+                    _normals(nodes, p + s, x, nrm, region[p + s])
+                    stale[p + s] = 0
             law_p = (0.0, 0.0, v, driven, placing)
             _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, (law.ply_guess[0], work.ply_near[0]),
-                  shares, (region[0], box), law_p)
+                  shares, (region[p], box), law_p)
             if sweep > 0:  # the other way round: ply p is the slave
                 for c in range(4):
                     box[1 + c], box[5 + c] = box[5 + c], box[1 + c]
             _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, (law.ply_guess[1], work.ply_near[1]),
-                  shares, (region[1], box), law_p)
+                  shares, (region[p + 1], box), law_p)
             d_lost, d_placed, d_moved, d_sped = _apply(
                 phys, sin, x, v, acc, lag, (nodes.ply_nodes[p], nodes.ply_nodes[p + 2]),
                 work.flag, work.node_field, (hot[plies:], p, tol, vtol, driven))
+            if d_moved > 0.0:
+                stale[p] = 1
+                stale[p + 1] = 1
             lost += d_lost
             placed += d_placed
             moved = max(moved, d_moved)
