@@ -132,8 +132,11 @@ def _dist2(x, a, b):
 def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, penalty):
     """The nodes of ply `slave` against the surface of ply `master` (normals nrm of master's
     nodes, times sign to point towards slave): impulses and placements into acc (integers).
-    nearest = (guess, near): the reference-nearest master node of each node, and each node's
-    nearest master node, written where the walk finds it; shares: scratch, (2, box count):
+    nearest = (guess, near, memo, stamp, epoch): the reference-nearest master node of each
+    node, and each node's nearest master node, written where the walk finds it; in the sweeps
+    of impulses alone (place False: the positions do not change between them) each node's
+    shares, gaps, their total and whether one acts, kept in memo[n] (records.Work.ply_memo)
+    with stamp[n] = epoch the first time and read from there after; shares: scratch, (2, box count):
     each box node's w and gap; boxes = (box, hot): master's _region, and the nodes to meet
     (below); penalty = (stiffness, φΔt, start-of-step
     velocities, driven, place): a stiffness > 0 takes the φ-scheme's penalty law instead
@@ -150,7 +153,7 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, pen
     distance, at least the contact distance (the transverse wave has not come). Only there
     does ply contact cost less than its full pass."""
     nodes, law = phys.nodes, phys.contact
-    guess, near = nearest
+    guess, near, memo, stamp, epoch = nearest
     box, hot = boxes
     inv_mass, mass = nodes.inv_mass, nodes.mass
     m0 = nodes.ply_nodes[master]
@@ -158,7 +161,6 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, pen
     mnx = nodes.rows[jm, ROW_COUNT]
     mny = nodes.ply_rows[master + 1] - jm
     rho = law.ply_reach[master]
-    rho2 = rho * rho
     bi = law.ply_box[master, 0]
     bj = law.ply_box[master, 1]
     wide = 2 * bi + 1
@@ -166,6 +168,8 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, pen
     gap = law.ply_gap[min(master, slave)]
     stiff, phi_dt, v_start, driven, place = penalty
     forces = stiff > 0.0
+    keep = not place and not forces
+    count = (2 * bj + 1) * wide
     steered = driven.shape[0] > 0
     s0 = nodes.ply_nodes[slave]
     snx = nodes.rows[nodes.ply_rows[slave], ROW_COUNT]
@@ -202,60 +206,29 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, pen
                 or cj < box[2] - LEVEL_BOX or cj > box[3] + LEVEL_BOX):
             near[n] = k
             continue
-        # walk over master's grid to its node nearest to n
-        best = _dist2(x, n, k)
-        for _step in range(mnx + mny):
-            ni, nj = ci, cj
-            for dj in range(-1, 2):
-                for di in range(-1, 2):
-                    ii = ci + di
-                    jj = cj + dj
-                    if (di == 0 and dj == 0) or ii < 0 or ii >= mnx or jj < 0 or jj >= mny:
-                        continue
-                    d2 = _dist2(x, n, m0 + jj * mnx + ii)
-                    if d2 < best:
-                        best = d2
-                        ni, nj = ii, jj
-            if ni == ci and nj == cj:
-                break
-            ci, cj = ni, nj
-        near[n] = m0 + cj * mnx + ci
-        # the shares w of the master nodes around it, and their sum in mirror-paired order
-        total = 0.0
-        acting = False
-        for dj in range(-bj, bj + 1):
-            for di in range(-bi, bi + 1):
-                ii = ci + di
-                jj = cj + dj
-                w = 0.0
-                g = 0.0
-                if 0 <= ii < mnx and 0 <= jj < mny:
-                    km = m0 + jj * mnx + ii
-                    if mass[km] > 0.0:
-                        dx = x[0, n] - x[0, km]
-                        dy = x[1, n] - x[1, km]
-                        dz = x[2, n] - x[2, km]
-                        nh = _normal(nrm, km, ii, jj, box, sign)
-                        g = (nh[0] * dx + nh[1] * dy) + nh[2] * dz
-                        r2 = ((dx * dx + dy * dy) + dz * dz) - g * g
-                        if r2 < rho2 and abs(g) < rho:
-                            q = 1.0 - r2 / rho2
-                            w = q * q
-                            if g < gap and g > -gap:
-                                acting = True
-                shares[0, (dj + bj) * wide + di + bi] = w
-                shares[1, (dj + bj) * wide + di + bi] = g
-        if not acting:
-            continue
-        for b in range(bj + 1):
-            row = 0.0
-            for jsign in range(2 if b > 0 else 1):
-                jrow = (bj + b if jsign == 0 else bj - b) * wide
-                part = shares[0, jrow + bi]
-                for a in range(1, bi + 1):
-                    part += shares[0, jrow + bi - a] + shares[0, jrow + bi + a]
-                row = part if jsign == 0 else row + part
-            total += row
+        if keep and stamp[n] == epoch:
+            # a sweep of impulses alone met n before, on these positions
+            r = near[n] - m0
+            ci = r % mnx
+            cj = r // mnx
+            for b in range(count):
+                shares[0, b] = memo[n, b]
+                shares[1, b] = memo[n, count + b]
+            total = memo[n, 2 * count]
+            if memo[n, 2 * count + 1] == 0.0:
+                continue
+        else:
+            ci, cj, total, acting = _shares(x, n, ci, cj, (m0, mnx, mny, bi, bj), nrm, box,
+                                            sign, (mass, rho, gap), shares, near)
+            if keep:
+                for b in range(count):
+                    memo[n, b] = shares[0, b]
+                    memo[n, count + b] = shares[1, b]
+                memo[n, 2 * count] = total
+                memo[n, 2 * count + 1] = 1.0 if acting else 0.0
+                stamp[n] = epoch
+            if not acting:
+                continue
         for dj in range(-bj, bj + 1):
             for di in range(-bi, bi + 1):
                 w = shares[0, (dj + bj) * wide + di + bi]
@@ -305,6 +278,74 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, pen
                         acc[1, c, km] -= units
 
 
+@njit(cache=True, inline="always")
+def _shares(x, n, ci, cj, grid, nrm, box, sign, law, shares, near):
+    """_pass's geometry of node n: from master's grid node (ci, cj) a walk over master's grid to
+    its node nearest to n (written to near[n]), then the shares w and gaps g of the master
+    nodes in the box around that one into shares (by box position), and their total in
+    mirror-paired order. grid = (first node, nx, ny, box half-widths bi, bj) of master, law =
+    (node masses, reach ρ, contact distance). Returns (ci, cj of the nearest node, total,
+    whether a pair acts: within the contact distance)."""
+    m0, mnx, mny, bi, bj = grid
+    mass, rho, gap = law
+    rho2 = rho * rho
+    wide = 2 * bi + 1
+    # walk over master's grid to its node nearest to n
+    best = _dist2(x, n, m0 + cj * mnx + ci)
+    for _step in range(mnx + mny):
+        ni, nj = ci, cj
+        for dj in range(-1, 2):
+            for di in range(-1, 2):
+                ii = ci + di
+                jj = cj + dj
+                if (di == 0 and dj == 0) or ii < 0 or ii >= mnx or jj < 0 or jj >= mny:
+                    continue
+                d2 = _dist2(x, n, m0 + jj * mnx + ii)
+                if d2 < best:
+                    best = d2
+                    ni, nj = ii, jj
+        if ni == ci and nj == cj:
+            break
+        ci, cj = ni, nj
+    near[n] = m0 + cj * mnx + ci
+    # the shares w of the master nodes around it, and their sum in mirror-paired order
+    total = 0.0
+    acting = False
+    for dj in range(-bj, bj + 1):
+        for di in range(-bi, bi + 1):
+            ii = ci + di
+            jj = cj + dj
+            w = 0.0
+            g = 0.0
+            if 0 <= ii < mnx and 0 <= jj < mny:
+                km = m0 + jj * mnx + ii
+                if mass[km] > 0.0:
+                    dx = x[0, n] - x[0, km]
+                    dy = x[1, n] - x[1, km]
+                    dz = x[2, n] - x[2, km]
+                    nh = _normal(nrm, km, ii, jj, box, sign)
+                    g = (nh[0] * dx + nh[1] * dy) + nh[2] * dz
+                    r2 = ((dx * dx + dy * dy) + dz * dz) - g * g
+                    if r2 < rho2 and abs(g) < rho:
+                        q = 1.0 - r2 / rho2
+                        w = q * q
+                        if g < gap and g > -gap:
+                            acting = True
+            shares[0, (dj + bj) * wide + di + bi] = w
+            shares[1, (dj + bj) * wide + di + bi] = g
+    if not acting:
+        return ci, cj, total, acting
+    for b in range(bj + 1):
+        row = 0.0
+        for jsign in range(2 if b > 0 else 1):
+            jrow = (bj + b if jsign == 0 else bj - b) * wide
+            part = shares[0, jrow + bi]
+            for a in range(1, bi + 1):
+                part += shares[0, jrow + bi - a] + shares[0, jrow + bi + a]
+            row = part if jsign == 0 else row + part
+        total += row
+    return ci, cj, total, acting
+
 PLY_STIFFNESS = 10.0
 """The φ-scheme's ply contact: its stiffness k_c over the axial stiffness EA/L0 of one segment
 of the softer ply (sim.builder). Ten times: with EA/L0 alone, on the hard impact of
@@ -335,12 +376,15 @@ def _all_pairs(phys, x, v, nrm, acc, phi_dt, v_start, near):
         _region(nodes, p, x, region[p])
         _normals(nodes, p, x, nrm, region[p])
     every = np.zeros(9, dtype=np.int64)
+    memo = np.empty((1, 1))  # the φ-scheme's passes place: no sweeps of impulses alone
+    stamp = np.empty(1, dtype=np.int64)
+    none = np.int64(0)  # (not a literal: the type ply_contact's epoch has)
     for p in range(plies - 1):
         law_p = (law.ply_stiffness[p], phi_dt, v_start, np.empty(0), True)
-        _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, (law.ply_guess[0], near), shares,
-              (region[p], every), law_p)
-        _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, (law.ply_guess[1], near), shares,
-              (region[p + 1], every), law_p)
+        _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, (law.ply_guess[0], near, memo, stamp, none),
+              shares, (region[p], every), law_p)
+        _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, (law.ply_guess[1], near, memo, stamp, none),
+              shares, (region[p + 1], every), law_p)
 
 
 @njit(cache=True)
@@ -563,6 +607,9 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
     # sweeps of impulses alone leave the positions, and so these, as they are
     region = np.empty((plies, 4), dtype=np.int64)
     stale = np.ones(plies, dtype=np.uint8)
+    # this call's mark on the nodes' memos of the sweeps of impulses alone (_pass)
+    work.ply_epoch[0] += 1
+    epoch = work.ply_epoch[0]
     lost = 0.0
     placed = 0.0
     vtol = 0.0  # the velocity tolerance, set by the first sweep
@@ -603,13 +650,15 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
                     _normals(nodes, p + s, x, nrm, region[p + s])
                     stale[p + s] = 0
             law_p = (0.0, 0.0, v, driven, placing)
-            _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, (law.ply_guess[0], work.ply_near[0]),
-                  shares, (region[p], box), law_p)
+            _pass(phys, p, p + 1, -1.0, x, v, nrm, acc,
+                  (law.ply_guess[0], work.ply_near[0], work.ply_memo[0], work.ply_stamp[0],
+                   epoch), shares, (region[p], box), law_p)
             if sweep > 0:  # the other way round: ply p is the slave
                 for c in range(4):
                     box[1 + c], box[5 + c] = box[5 + c], box[1 + c]
-            _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, (law.ply_guess[1], work.ply_near[1]),
-                  shares, (region[p + 1], box), law_p)
+            _pass(phys, p + 1, p, 1.0, x, v, nrm, acc,
+                  (law.ply_guess[1], work.ply_near[1], work.ply_memo[1], work.ply_stamp[1],
+                   epoch), shares, (region[p + 1], box), law_p)
             d_lost, d_placed, d_moved, d_sped = _apply(
                 phys, sin, x, v, acc, lag, (nodes.ply_nodes[p], nodes.ply_nodes[p + 2]),
                 work.flag, work.node_field, (hot[plies:], p, tol, vtol, driven))

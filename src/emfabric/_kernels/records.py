@@ -548,6 +548,24 @@ class Work(NamedTuple):
     diag: np.ndarray
     """Central differences: the fabric diagnostics of the last attempt's end state,
     (DIAG_COUNT,) in diagnostics.fabric_diagnostics's order."""
+    ply_memo: np.ndarray
+    """Central differences' ply contact, for the sweeps of impulses alone (whose positions do
+    not change): each node's shares w and gaps g of the master nodes around it, their total and
+    whether one acts, as plies._pass found them, against the ply below (0) and above (1),
+    (2, node_count, 2·box + 2) for the largest box of master nodes; (2, 1, 1) for one ply."""
+    ply_stamp: np.ndarray
+    """The ply_contact call (ply_epoch) whose sweeps of impulses alone wrote each node's
+    ply_memo, −1 for none, (2, node_count) int64."""
+    ply_epoch: np.ndarray
+    """ply_contact's call count, (1,) int64."""
+
+
+def ply_box_size(ply_box: np.ndarray) -> int:
+    """The most master nodes a node meets in ply contact: the largest (2 i + 1)(2 j + 1) of
+    Contact.ply_box's rows (1 without plies)."""
+    if ply_box.shape[0] == 0:
+        return 1
+    return int(((2 * ply_box[:, 0] + 1) * (2 * ply_box[:, 1] + 1)).max())
 
 
 def pack_tables(grids) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -575,10 +593,12 @@ def grid_nodes(nx: int, ny: int, x0, mass, inv_mass, charge) -> Nodes:
 
 
 def make_work(node_count: int, row_count: int, seg_total: int, seg_count: int = 0,
-              plies: int = 1) -> Work:
+              plies: int = 1, ply_box: int = 1) -> Work:
     """The workspace of a step: node_count nodes in row_count grid rows, seg_total yarn
     segments; seg_count: the segments segment contact may touch (0 without segment contact:
-    its arrays are then one element long); plies: 1 leaves ply contact's arrays one node long."""
+    its arrays are then one element long); plies: 1 leaves ply contact's arrays one node long;
+    ply_box: the most master nodes a node meets in ply contact (Contact.ply_box's largest
+    (2 i + 1)(2 j + 1))."""
     n = node_count
     ny = row_count
     nmax = n + seg_count
@@ -599,4 +619,7 @@ def make_work(node_count: int, row_count: int, seg_total: int, seg_count: int = 
                 np.zeros((3, n if plies > 1 else 1)), np.zeros((3, n if plies > 1 else 1)),
                 np.zeros((3, n if plies > 1 else 1)),
                 np.full((2, n if plies > 1 else 1), -1, dtype=np.int64), np.zeros((2, 3)),
-                np.zeros(DIAG_COUNT))
+                np.zeros(DIAG_COUNT),
+                np.zeros((2, n if plies > 1 else 1, 2 * ply_box + 2 if plies > 1 else 1)),
+                np.full((2, n if plies > 1 else 1), -1, dtype=np.int64),
+                np.zeros(1, dtype=np.int64))

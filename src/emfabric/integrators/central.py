@@ -27,7 +27,7 @@ from emfabric._kernels.explicit import (
     stable_step,
 )
 from emfabric._kernels.nodes import ROWBUF_ROWS
-from emfabric._kernels.records import make_work
+from emfabric._kernels.records import make_work, ply_box_size
 from emfabric.integrators.base import IntegratorBase, StepInfo
 from emfabric.sim.fastcall import Direct
 from emfabric.sim.model import Model
@@ -65,7 +65,8 @@ class CentralDifference(IntegratorBase):
         self.dt_min = opts.dt_min
         self.work = make_work(model.node_count, model.ny, model.seg_count,
                               model.seg_count if model.physics.contact.segments else 0,
-                              model.ply_count)
+                              model.ply_count,
+                              ply_box_size(model.physics.contact.ply_box))
         self.work.frame[1] = model.flight_direction
         self.scratch = np.empty(model.node_count)
         self._measured: State | None = None  # the state work.diag belongs to
