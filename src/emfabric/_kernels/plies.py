@@ -546,8 +546,9 @@ went with it, changed by ~2 % of the first sweep's every sweep without end. With
 placements they fall to ~3.5 % of it in 40 sweeps and slowly after (a node meets nine nodes
 of the other ply, each a pair: docs/theory.md §5.1); pack-field's ω_x at 100 µs with 8 / 32 /
 64 such sweeps: −461 / −457 / −453 rad/s, and with 2 / 4 / 8: −453 / −458 / −460 (worktree runs,
-the first three before the pair skip was removed); the whole pack-field run costs 3.9 × what
-it did with none (docs/packs.md)."""
+the first three before the pair skip was removed); they made the whole pack-field run 3.9 × as
+long as with none, 1.6 × since the sweeps keep what does not change between them (their
+nodes' shares and gaps, the plies' normals: docs/packs.md)."""
 PLY_VELOCITY_TOLERANCE = 0.01
 """Central differences' ply contact sweeps also until no node's velocity changes in a sweep by more
 than this fraction of the largest change of the step's first sweep (along any axis). A tolerance
@@ -578,14 +579,16 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
     PLY_VELOCITY_SWEEPS that give impulses alone; a pair none of whose plies' nodes changed by
     more than the tolerances since it was last met is not met again). A ply's _region and
     normals are computed again only after a sweep placed some of its nodes, so the sweeps of
-    impulses alone compute them once. The first sweep meets
-    every node; the later ones only the nodes near those that changed by more than the
-    tolerances since their pair was met (_apply's hot boxes, _pass): elsewhere a pass would give
-    the same impulses and placements within them. Under a projectile the sweeps rarely converge
-    (a sharp fold), and the first sweep costs what every sweep cost before; the sweeps of
-    impulses alone made the whole pack-field run 3.9 × as long (docs/packs.md, docs/theory.md
-    §5.1). A node the projectile drives acts as one of infinite mass (_pass): the projectile put
-    it on its surface, and the pack below is placed against it. Its velocity stays as the
+    impulses alone compute them once, and those sweeps keep each node's shares and gaps from
+    their first visit (work.ply_memo, _pass). The first sweep meets every node; the later
+    ones only the nodes near those that changed by more than the tolerances since their pair
+    was met (_apply's hot boxes, _pass): elsewhere a pass would give the same impulses and
+    placements within them. Under a projectile the sweeps rarely converge (a sharp fold), and
+    the first sweep costs what every sweep cost before; the sweeps of impulses alone made the
+    whole pack-field run 1.6 × as long (3.9 × before they kept the shares and normals:
+    docs/packs.md, docs/theory.md §5.1). A node the projectile drives acts as one of infinite
+    mass (_pass): the projectile put it on its surface, and the pack below is placed against
+    it. Its velocity stays as the
     projectile left it until the sweeps end, and only then takes the −J its pairs gave it
     (_apply_driven; the projectile's next contact brings it back to the surface): applied sweep
     by sweep, it slowed by its first −J/m and then parted from the node below, so the projectile
