@@ -600,7 +600,8 @@ def make_work(node_count: int, row_count: int, seg_total: int, seg_count: int = 
     segments; seg_count: the segments segment contact may touch (0 without segment contact:
     its arrays are then one element long); plies: 1 leaves ply contact's arrays one node long;
     ply_box: the most master nodes a node meets in ply contact (Contact.ply_box's largest
-    (2 i + 1)(2 j + 1))."""
+    (2 i + 1)(2 j + 1), ply_box_size), which sizes ply_memo: central differences' (the
+    φ-scheme's passes keep no memo, and leave it at 1)."""
     n = node_count
     ny = row_count
     nmax = n + seg_count

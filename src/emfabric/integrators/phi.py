@@ -15,7 +15,7 @@ import numpy as np
 
 from emfabric._kernels.contact import travel_step
 from emfabric._kernels.energy import step_energy
-from emfabric._kernels.records import Solver, make_work, ply_box_size
+from emfabric._kernels.records import Solver, make_work
 from emfabric._kernels.step import (
     BODY_NOT_CONVERGED,
     CONTACT_MISSED,
@@ -70,8 +70,7 @@ class Integrator(IntegratorBase):
             n >= THREADS_FROM_NODES and numba.config.NUMBA_NUM_THREADS > 1), adaptive=adaptive)
         self.work = make_work(model.node_count, model.ny, model.seg_count,
                               model.seg_count if model.physics.contact.segments else 0,
-                              model.ply_count,
-                              ply_box_size(model.physics.contact.ply_box))
+                              model.ply_count)
         solver = model.options
         # None for the plain fixed point: the step kernel is then compiled without Anderson
         self.accel = None
