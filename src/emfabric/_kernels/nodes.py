@@ -167,6 +167,14 @@ TANGENT = 2
 """_tensions mode bit: write each segment's axial tangent stiffness (the stable step's)."""
 STATS = 4
 """_tensions mode bit: return the segments' share of the fabric diagnostics (_segment_stats)."""
+ROW_ERRORS = "numpy"
+"""Numba's error model of the row-block kernels (_row_block, _drift_block, _kick_block):
+NumPy's, not Python's. Python's tests every division for a zero divisor to raise
+ZeroDivisionError: a branch out of each loop that divides, which keeps the compiler from
+vectorising it (the Boris rotation's, the φ-update's). These kernels divide only by numbers
+that cannot be zero (1 + |t|², a Δt tested > 0), so the tests never fired and the numbers are
+the same to the bit; a non-finite value still stops the step (the step kernels' NOT_FINITE).
+Measured (`python benchmarks/bench.py --quick`, docs/performance.md): see "Vectorised rows"."""
 NO_STATS = (0.0, 0.0, 0.0, 1.0)
 """_segment_stats of no segments: (max U² of the unbroken, strain energy, broken, min α)."""
 
@@ -448,7 +456,7 @@ def _row_force(j, arr, mat, uni, sourced, grav, prev, buf, ru, rd, mode, inv_dt)
     return (max(sw[0], sfl[0]), sw[1] + sfl[1], sw[2] + sfl[2], min(sw[3], sfl[3]))
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, error_model=ROW_ERRORS)
 def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
     """Rows j0 ≤ j < j1 of the fused φ iterate: the force of each row (_row_force), consumed at
     once by the φ-update of its nodes (eqs. 3.2, A12–A13) and the error terms of eq. 3.10."""
@@ -630,14 +638,16 @@ def _rotate_row(nb, count, inv_mass, charge, uni, sourced, nf, x, tau, v, vat, b
         buf[ROW_ROTATION, u] = s * b[0]
         buf[ROW_ROTATION + 1, u] = s * b[1]
         buf[ROW_ROTATION + 2, u] = s * b[2]
-    big = 0.0
     for i in range(count):
         u = uint64(i)
-        y2 = (buf[ROW_ROTATION, u] * buf[ROW_ROTATION, u]
-              + buf[ROW_ROTATION + 1, u] * buf[ROW_ROTATION + 1, u]
-              + buf[ROW_ROTATION + 2, u] * buf[ROW_ROTATION + 2, u])
-        buf[ROW_PROJECTION, u] = y2
-        big = max(big, y2)
+        buf[ROW_PROJECTION, u] = (buf[ROW_ROTATION, u] * buf[ROW_ROTATION, u]
+                                  + buf[ROW_ROTATION + 1, u] * buf[ROW_ROTATION + 1, u]
+                                  + buf[ROW_ROTATION + 2, u] * buf[ROW_ROTATION + 2, u])
+    # the largest apart: a max in the loop above keeps it from being vectorised (without
+    # fast-math the compiler may not reorder a select-based maximum)
+    big = 0.0
+    for i in range(count):
+        big = max(big, buf[ROW_PROJECTION, uint64(i)])
     if big == 0.0:
         return
     if big < TAN_SERIES_LIMIT:
@@ -710,7 +720,7 @@ def _buf_total(buf, r, count):
     return (s0 + s1) + (s2 + s3)
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, error_model=ROW_ERRORS)
 def _drift_block(j0, j1, phys, sin, sout, work, t0, dt, buf):
     """Rows j0 ≤ j < j1 of the first half of a central-difference step (explicit.central_step):
     v⁻ = v + h/(2m) f (f without its magnetic part), v_{n+½} = v⁻ turned by B(x_n, t0) for h/2,
@@ -773,7 +783,7 @@ def _drift_block(j0, j1, phys, sin, sout, work, t0, dt, buf):
                 x1[c, k] = x0[c, k] + (dt if inv_mass[k] > 0.0 else 0.0) * w
 
 
-@njit(cache=True, _nrt=False)
+@njit(cache=True, _nrt=False, error_model=ROW_ERRORS)
 def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
     """Rows j0 ≤ j < j1 of the second half of a central-difference step: the force at sout.x
     and t1 (_row_force, trial damage from sin.alpha into sout.alpha: the step's one force
@@ -815,11 +825,13 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
         nx = nodes.rows[j, ROW_COUNT]
         # the Gershgorin bound: 2 Σ k_t/m over the node's four segments
         rku, rkd = ru + 3, rd + 3
-        worst = 0.0
         for i in range(nx):
             u = uint64(i)
-            worst = max(worst, 2.0 * ((buf[RKW, u] + buf[RKW, u + uint64(1)])
-                                      + (buf[rku, u] + buf[rkd, u])) * inv_mass[uint64(nb + i)])
+            ksum = (buf[RKW, u] + buf[RKW, u + uint64(1)]) + (buf[rku, u] + buf[rkd, u])
+            buf[ROW_PROJECTION, u] = 2.0 * ksum * inv_mass[uint64(nb + i)]
+        worst = 0.0  # the largest apart, as in _rotate_row (ROW_PROJECTION is scratch here)
+        for i in range(nx):
+            worst = max(worst, buf[ROW_PROJECTION, uint64(i)])
         sums[SUM_STIFFNESS, j] = worst
         # the work of the yarn force over the placement of the candidates (central_step); the
         # field's and gravity's are booked from the kicks' velocities, which see no placement
