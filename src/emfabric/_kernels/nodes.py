@@ -845,16 +845,20 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
                     proj += fy * (x1[c, n] - xbuf[c, n] - half * (v1[c, n] - v_pre[c, n]))
         sums[SUM_PROJECTION, j] = proj
         _rotate_row(nb, nx, inv_mass, charge, uni, sourced, nf, x1, half, v1, (0, nb), buf)
+        # the second half kick in short loops over few arrays, so that each vectorises (one loop
+        # writing v1, fo, eo and the row buffer did not): v_{n+1} into the buffer's rotation
+        # rows (free once _rotate_row is done) with the half kick's field and gravity work and
+        # |v_{n+1}|², then v1, f and E from there
+        nv = ROW_ROTATION
         for i in range(nx):
             u = uint64(i)
             k = uint64(nb + i)
-            ee, b = node_field_of(uni, sourced, nf, nb + i, (x1[0, k], x1[1, k], x1[2, k]))
+            ee, _b = node_field_of(uni, sourced, nf, nb + i, (x1[0, k], x1[1, k], x1[2, k]))
             hk = half * inv_mass[k]
             vx, vy, vz = v1[0, k], v1[1, k], v1[2, k]
-            fx, fy, fz = buf[rf, u], buf[rf + 1, u], buf[rf + 2, u]
-            nvx = vx + hk * fx
-            nvy = vy + hk * fy
-            nvz = vz + hk * fz
+            nvx = vx + hk * buf[rf, u]
+            nvy = vy + hk * buf[rf + 1, u]
+            nvz = vz + hk * buf[rf + 2, u]
             bx = 0.5 * (vx + nvx)
             by = 0.5 * (vy + nvy)
             bz = 0.5 * (vz + nvz)
@@ -862,25 +866,32 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
             buf[ROW_DT_OVER_MASS, u] = half * mass[k] * ((grav[0] * bx + grav[1] * by)
                                                          + grav[2] * bz)
             buf[ROW_VEL_EXPLICIT, u] = (nvx * nvx + nvy * nvy) + nvz * nvz
-            v1[0, k] = nvx
-            v1[1, k] = nvy
-            v1[2, k] = nvz
-            fm = magnetic_force(charge[k], (nvx, nvy, nvz), b)
-            fo[0, k] = fx + fm[0]
-            fo[1, k] = fy + fm[1]
-            fo[2, k] = fz + fm[2]
+            buf[nv, u] = nvx
+            buf[nv + 1, u] = nvy
+            buf[nv + 2, u] = nvz
+            if viscous:
+                # the viscous force's work in this half kick (the force for the next one below)
+                buf[ROW_VISC_WORK, u] = half * ((buf[ROW_VISC_FORCE, u] * bx
+                                                 + buf[ROW_VISC_FORCE + 1, u] * by)
+                                                + buf[ROW_VISC_FORCE + 2, u] * bz)
+        for c in range(3):
+            for i in range(nx):
+                v1[c, uint64(nb + i)] = buf[nv + c, uint64(i)]
+        for i in range(nx):
+            u = uint64(i)
+            k = uint64(nb + i)
+            ee, b = node_field_of(uni, sourced, nf, nb + i, (x1[0, k], x1[1, k], x1[2, k]))
+            fm = magnetic_force(charge[k], (buf[nv, u], buf[nv + 1, u], buf[nv + 2, u]), b)
+            fo[0, k] = buf[rf, u] + fm[0]
+            fo[1, k] = buf[rf + 1, u] + fm[1]
+            fo[2, k] = buf[rf + 2, u] + fm[2]
             eo[0, k] = ee[0]
             eo[1, k] = ee[1]
             eo[2, k] = ee[2]
-            if viscous:
-                # the viscous force's work in this half kick, and the force for the next one
-                fvx = buf[ROW_VISC_FORCE, u]
-                fvy = buf[ROW_VISC_FORCE + 1, u]
-                fvz = buf[ROW_VISC_FORCE + 2, u]
-                buf[ROW_VISC_WORK, u] = half * ((fvx * bx + fvy * by) + fvz * bz)
-                fvo[0, k] = fvx
-                fvo[1, k] = fvy
-                fvo[2, k] = fvz
+        if viscous:
+            for c in range(3):
+                for i in range(nx):
+                    fvo[c, uint64(nb + i)] = buf[ROW_VISC_FORCE + c, uint64(i)]
         sums[SUM_WORK_FIELD, j] = _buf_total(buf, ROW_INV_DENOM, nx)
         sums[SUM_WORK_GRAVITY, j] = _buf_total(buf, ROW_DT_OVER_MASS, nx)
         sums[SUM_SPEED, j] = _buf_total(buf, ROW_VEL_EXPLICIT, nx)
