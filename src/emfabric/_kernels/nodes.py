@@ -973,10 +973,14 @@ def _node_stats(nb, count, mass, x, v, xref, frame, buf, sums, j):
     sums[m + 6, j] = hiz
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def drift_rows(phys, sin, sout, work, t0, dt, rowbuf):
     """The first half of a central-difference step for every row (_drift_block), serially;
-    rowbuf (ROWBUF_ROWS, nx + 1). Row sums in work.row_sums."""
+    rowbuf (ROWBUF_ROWS, nx + 1). Row sums in work.row_sums.
+
+    Inlined where compiled code calls it (explicit.central_step), as kick_rows is: a
+    dispatcher of its own would be one more library whose final module re-optimises and emits
+    the whole of _drift_block again (2.1 s of a cold start)."""
     rec = RowRecords(phys.nodes, phys.yarns, phys.material, phys.field)
     ny = phys.nodes.ny
     for b in range((ny + ROWS_PER_BLOCK - 1) // ROWS_PER_BLOCK):
@@ -984,11 +988,17 @@ def drift_rows(phys, sin, sout, work, t0, dt, rowbuf):
         _drift_block(j0, min(ny, j0 + ROWS_PER_BLOCK), rec, sin, sout, work, t0, dt, rowbuf)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def kick_rows(phys, sin, sout, work, t1, dt, rowbuf):
     """The force evaluation and second half of a central-difference step for every row
     (_kick_block), serially, in the same row blocks as kick_rows_threads; rowbuf (ROWBUF_ROWS,
-    nx + 1). Row sums in work.row_sums."""
+    nx + 1). Row sums in work.row_sums.
+
+    Inlined where compiled code calls it (explicit.central_step): compiled on its own, its
+    library's final module re-optimises and emits the whole of _kick_block once more (3.3 s of
+    a cold start's critical path), so the run never calls it from Python either
+    (sim.state.update_forces calls _kick_block row block by row block). Called from Python
+    (the benchmarks), it compiles as any kernel."""
     rec = RowRecords(phys.nodes, phys.yarns, phys.material, phys.field)
     ny = phys.nodes.ny
     for b in range((ny + ROWS_PER_BLOCK - 1) // ROWS_PER_BLOCK):

@@ -86,13 +86,17 @@ class CentralDifference(IntegratorBase):
         differs only costs the compile here again (tests/test_kernel_cache.py checks them)."""
         from emfabric._kernels.contact import segment_contact
         from emfabric._kernels.explicit import _node_contact
-        from emfabric._kernels.nodes import drift_rows
+        from emfabric._kernels.nodes import ROWS_PER_BLOCK, _drift_block
         from emfabric._kernels.plies import ply_contact
+        from emfabric._kernels.records import RowRecords
 
         a, phys, work = state.arrays, self.physics, self.work
         rowbuf = self.rowbuf if self.rowbuf is not None else np.empty((ROWBUF_ROWS,
                                                                        self.model.nx + 1))
-        out = [(drift_rows, (phys, a, a, work, 0.0, 0.0, rowbuf)),
+        # the drift's row block (drift_rows is inlined into the step kernel; 0 and
+        # ROWS_PER_BLOCK: int64 row bounds, as drift_rows passes them)
+        rec = RowRecords(phys.nodes, phys.yarns, phys.material, phys.field)
+        out = [(_drift_block, (0, ROWS_PER_BLOCK, rec, a, a, work, 0.0, 0.0, rowbuf)),
                (_node_contact, (phys, a, a, work, 0, 0.0))]
         plies, segs = self.switches
         if plies is not None:

@@ -12,7 +12,7 @@ import numpy as np
 from emfabric._kernels.body import field_wrench
 from emfabric._kernels.diagnostics import total_energy
 from emfabric._kernels.fields import fill_node_fields
-from emfabric._kernels.nodes import ROWBUF_ROWS, kick_rows
+from emfabric._kernels.nodes import ROWBUF_ROWS, ROWS_PER_BLOCK, _kick_block
 from emfabric._kernels.records import (
     BODY_F,
     BODY_M,
@@ -22,6 +22,7 @@ from emfabric._kernels.records import (
     BODY_W,
     BODY_X,
     ENERGY_TERMS,
+    RowRecords,
     StateArrays,
     make_work,
 )
@@ -176,7 +177,17 @@ def update_forces(model: Model, state: State) -> None:
     out = StateArrays(scratch.node_x, scratch.node_v, state.node_f, scratch.seg_alpha,
                       scratch.body, state.node_e, scratch.node_contact, state.node_fv,
                       scratch.seg_strain)
-    kick_rows(m.physics, start, out, work, state.t, 0.0, np.empty((ROWBUF_ROWS, m.nx + 1)))
+    # kick_rows's row blocks, called from here: kick_rows itself is inlined into the step
+    # kernel and never compiled on its own in a run (its docstring says why); the arguments
+    # have the types kick_rows gives _kick_block, so this compiles nothing the step kernel
+    # does not use (tests/test_kernel_cache.py)
+    phys = m.physics
+    rec = RowRecords(phys.nodes, phys.yarns, phys.material, phys.field)
+    rowbuf = np.empty((ROWBUF_ROWS, m.nx + 1))
+    ny = int(phys.nodes.ny)
+    for j0 in range(0, ny, ROWS_PER_BLOCK):
+        _kick_block(j0, min(ny, j0 + ROWS_PER_BLOCK), rec, start, out, work, state.t, 0.0,
+                    rowbuf)
     if m.has_body:
         b = state.body
         field_wrench(m.body, m.field, state.t, b, b[BODY_F], b[BODY_M])
