@@ -273,7 +273,8 @@ def test_a_second_process_compiles_what_the_step_kernel_then_loads(tmp_path):
                    env=_env(env), capture_output=True, text=True, check=True)
     out = _run(PRECOMPILED_RUN, env).splitlines()
     counts, targets, compiled_again = (json.loads(line) for line in out[-3:])
-    assert {"_drift_block", "_node_contact", "ply_contact", "segment_contact"} <= set(targets)
+    assert {"_drift_block", "_node_contact", "ply_contact", "segment_contact", "_mid_rotation",
+            "_friction_work", "_body_field_work", "_travel_from_rows"} <= set(targets)
     assert compiled_again == []
     # the row wrappers are inlined into the step kernel, never compiled on their own in a run
     # (each would re-optimise and emit its whole row block again), and the initial forces

@@ -85,10 +85,16 @@ class CentralDifference(IntegratorBase):
         them (the records, the state's arrays, float64 times, an int64 count); a type that
         differs only costs the compile here again (tests/test_kernel_cache.py checks them)."""
         from emfabric._kernels.contact import segment_contact
-        from emfabric._kernels.explicit import _node_contact
+        from emfabric._kernels.explicit import (
+            _body_field_work,
+            _friction_work,
+            _mid_rotation,
+            _node_contact,
+            _travel_from_rows,
+        )
         from emfabric._kernels.nodes import ROWS_PER_BLOCK, _drift_block
         from emfabric._kernels.plies import ply_contact
-        from emfabric._kernels.records import RowRecords
+        from emfabric._kernels.records import BODY_R0, RowRecords
 
         a, phys, work = state.arrays, self.physics, self.work
         rowbuf = self.rowbuf if self.rowbuf is not None else np.empty((ROWBUF_ROWS,
@@ -106,6 +112,15 @@ class CentralDifference(IntegratorBase):
                                           a.body, 0, 0, a.x, a.v, work, 0.0)))
         out += [(stable_step, (phys, a.x, a.alpha, self.scratch)),
                 (travel_step, (phys, a.x, a.v, a.body))]
+        # then what the step kernel's own compile reaches after them, in its order: the run
+        # gets there after the force kernel and the initial state's record (the second
+        # process's list above is done by then, docs/performance.md "The first run")
+        rot = a.body[BODY_R0:BODY_R0 + 3]
+        out += [(_mid_rotation, (phys.body, rot, (0.0, 0.0, 0.0), 0.0, ROTATION_TOLERANCE,
+                                 work.body_scratch, rot)),
+                (_friction_work, (phys, a, a, work, 0, 0.0, (0.0, 0.0, 0.0))),
+                (_body_field_work, (phys, a.body, a.body, 0.0, 0.0)),
+                (_travel_from_rows, (phys, work.row_sums, phys.nodes.ny, a.body))]
         return out
 
     def _compile_target(self, s_in: State, s_out: State, threads: np.ndarray):
