@@ -233,8 +233,11 @@ def test_installed_numba_has_the_names_and_installing_again_replaces(monkeypatch
     assert not isinstance(caching.CompileResultCacheImpl(elsewhere).locator, again)
 
 
+PACK_FSP = {"fabric.plies": 2, "fabric.nodes": [21, 21], "solver.end_time": 2e-7}
+"""A pack struck by an FSP: ply and segment contact, so every precompile target."""
+
 PRECOMPILED_RUN = """
-import json, logging
+import json, logging, sys
 from numba.core import event
 rec = event.RecordingListener()
 event.register("numba:compile", rec)
@@ -243,44 +246,55 @@ from emfabric.integrators import make_integrator
 from emfabric.sim.builder import build_model
 from emfabric.sim.state import blank_state
 logging.disable(logging.WARNING)
-sc = load_scenario("pack-fsp", {"fabric.plies": 2, "fabric.nodes": [21, 21],
-                                "solver.end_time": 2e-7})
+sc = load_scenario("pack-fsp", json.loads(sys.argv[1]))
 model = build_model(sc, writes=False)
 targets = {k.py_func.__qualname__
            for k, _a in make_integrator(model, threads=1).precompile_targets(blank_state(model))}
 run(sc, threads=1)
 starts = [ev.data["dispatcher"].py_func.__qualname__ for _ts, ev in rec.buffer if ev.is_start]
 here = set(starts)
-print(json.dumps({name: starts.count(name) for name in
-                  ("_kick_block", "_drift_block", "kick_rows", "drift_rows")}))
+print(json.dumps({name: starts.count(name) for name in ROW_KERNELS}))
 print(json.dumps(sorted(targets)))
 print(json.dumps(sorted(targets & here)))
 """
+ROW_KERNELS = ("_kick_block", "_drift_block", "_row_block", "kick_rows", "drift_rows",
+               "fused_iterate")
+PRECOMPILED_RUN = PRECOMPILED_RUN.replace("ROW_KERNELS", repr(ROW_KERNELS))
 
 
-def test_a_second_process_compiles_what_the_step_kernel_then_loads(tmp_path):
+@pytest.mark.parametrize("integrator, expected", [
+    ("central-difference", {"_drift_block", "_node_contact", "ply_contact", "segment_contact",
+                            "_mid_rotation", "_friction_work", "_body_field_work",
+                            "_travel_from_rows", "stable_step", "travel_step"}),
+    ("phi", {"_row_block", "travel_step", "ply_forces", "ply_update", "node_contact",
+             "segment_contact", "body_update", "step_energy"}),
+])
+def test_a_second_process_compiles_what_the_step_kernel_then_loads(tmp_path, integrator,
+                                                                   expected):
     """On a cold cache a run has a second process compile the step kernel's largest callees
-    (runner.precompile) into the cache. Their argument types must be the ones the step kernel
+    (runner.precompile) into the cache. Their argument types must be the ones the run
     passes, or the run compiles them again: after the second process has finished, a run of a
-    pack struck by an FSP (ply and segment contact: every target) compiles none of them, and
-    the kick's row block once."""
+    pack struck by an FSP (ply and segment contact: every target) compiles none of them, for
+    either scheme, and the kick's row block once."""
     env = {"NUMBA_CACHE_DIR": str(tmp_path), "EMFABRIC_PRECOMPILE": "0"}
+    keys = json.dumps({**PACK_FSP, "solver.integrator": integrator})
     text = subprocess.run(
-        [sys.executable, "-c", "from emfabric import load_scenario; print(load_scenario("
-         "'pack-fsp', {'fabric.plies': 2, 'fabric.nodes': [21, 21], 'solver.end_time': 2e-7})"
-         ".to_toml())"], env=_env(env), capture_output=True, text=True, check=True).stdout
+        [sys.executable, "-c", "import json, sys; from emfabric import load_scenario; "
+         "print(load_scenario('pack-fsp', json.loads(sys.argv[1])).to_toml())", keys],
+        env=_env(env), capture_output=True, text=True, check=True).stdout
     subprocess.run([sys.executable, "-m", "emfabric.runner.precompile"], input=text,
                    env=_env(env), capture_output=True, text=True, check=True)
-    out = _run(PRECOMPILED_RUN, env).splitlines()
+    out = subprocess.run([sys.executable, "-c", PRECOMPILED_RUN, keys], env=_env(env),
+                         capture_output=True, text=True, check=True).stdout.splitlines()
     counts, targets, compiled_again = (json.loads(line) for line in out[-3:])
-    assert {"_drift_block", "_node_contact", "ply_contact", "segment_contact", "_mid_rotation",
-            "_friction_work", "_body_field_work", "_travel_from_rows"} <= set(targets)
+    assert set(targets) == expected
     assert compiled_again == []
-    # the row wrappers are inlined into the step kernel, never compiled on their own in a run
-    # (each would re-optimise and emit its whole row block again), and the initial forces
-    # (sim.state.update_forces) call the kick's row block with the very types the step
-    # kernel passes it: one compile of it in all
-    assert counts == {"_kick_block": 1, "_drift_block": 0, "kick_rows": 0, "drift_rows": 0}
+    # the loops over row blocks are inlined into the step kernel, never compiled on their own
+    # in a run (each would re-optimise and emit its whole row block again); the initial
+    # forces (sim.state.update_forces) call the kick's row block with the very types the
+    # central-difference step kernel passes it: one compile of it in all
+    assert counts == {"_kick_block": 1, "_drift_block": 0, "_row_block": 0, "kick_rows": 0,
+                      "drift_rows": 0, "fused_iterate": 0}
 
 
 def test_the_second_process_is_started_only_where_it_can_help(monkeypatch):

@@ -544,7 +544,7 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
 ROWS_PER_BLOCK = 16
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def fused_iterate(phys, prev, sin, sout, work, t1, phi, dt, rowbuf):
     """Yarn tensions at the iterate `prev` and the φ-update of every node from the start state
     sin (x, v, f, committed α) into sout (x, v, f; trial damage into sout.alpha), serially.
@@ -552,7 +552,8 @@ def fused_iterate(phys, prev, sin, sout, work, t1, phi, dt, rowbuf):
     work: the step's Work record (node fields, damage thresholds, flag — nodes left out of the
     error measure —, the error terms and their per-row sums row_sums). rowbuf: (ROWBUF_ROWS,
     nx + 1). Walks the same row blocks as the threaded kernel, one after the other: the same
-    arithmetic, and one compiled specialisation of _row_block for both.
+    arithmetic, and one compiled specialisation of _row_block for both. Inlined into the step
+    kernel (step.fabric_iterate), as kick_rows is (its docstring says why).
     """
     rec = RowRecords(phys.nodes, phys.yarns, phys.material, phys.field)
     ny = phys.nodes.ny

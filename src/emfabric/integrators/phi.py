@@ -104,6 +104,43 @@ class Integrator(IntegratorBase):
                 f"{'anderson' if self.accel is not None else 'fixed-point'}"
                 + self.switch_suffix())
 
+    def precompile_targets(self, state: State) -> list[tuple]:
+        """The serial step kernel's largest callees and the step's energy kernel, for the
+        second process of a cold start (runner.precompile), with arguments of the types the
+        run passes them (the records, the state's arrays, float64 times and weights, int64
+        counts, a bool); a type that differs only costs the compile here again
+        (tests/test_kernel_cache.py checks them). In the order the run reaches them: the row
+        block of the φ-update first (fused_iterate is inlined into the step kernel), the
+        no-tunnelling limit the run takes before its first attempt, then contact, the body and
+        the energy of the accepted step."""
+        from emfabric._kernels.body import body_update
+        from emfabric._kernels.contact import node_contact, segment_contact
+        from emfabric._kernels.nodes import ROWBUF_ROWS, ROWS_PER_BLOCK, _row_block
+        from emfabric._kernels.plies import ply_forces
+        from emfabric._kernels.records import RowRecords
+        from emfabric._kernels.step import ply_update
+
+        a, phys, work = state.arrays, self.physics, self.work
+        rowbuf = self.rowbuf if self.rowbuf is not None else np.empty((ROWBUF_ROWS,
+                                                                       self.model.nx + 1))
+        phi, dt, t = self.solver.phi, 0.0, 0.0
+        rec = RowRecords(phys.nodes, phys.yarns, phys.material, phys.field)
+        out = [(_row_block, (0, ROWS_PER_BLOCK, rec, a.x, a, a, work, t, phi, dt, rowbuf)),
+               (travel_step, (phys, a.x, a.v, a.body))]
+        plies, segs = self.switches
+        if plies is not None:
+            out += [(ply_forces, (phys, a.x, a.v, a.v, work, work.ply_force, phi * dt)),
+                    (ply_update, (phys, work, a.x, a.v, a.f, a.x, a.x, phi, dt))]
+        out.append((node_contact, (phys.nodes, phys.body, phys.contact, a.body, 0, a.x, a.v,
+                                   work, phi, dt, False)))
+        if segs is not None:
+            out.append((segment_contact, (phys.nodes, phys.yarns, phys.body, phys.contact,
+                                          a.body, 0, 0, a.x, a.v, work, 0.0)))
+        out += [(body_update, (phys.body, phys.field, a.body, a.body, t, phi, dt, work.reaction,
+                               work.body_scratch, self.solver.tolerance)),
+                (step_energy, (phys, a, a, 0, work, t, phi, dt, state.energy))]
+        return out
+
     def _compile_target(self, s_in: State, s_out: State, threads: np.ndarray):
         return attempt_step, self._args(s_in, s_out, 0.0, None, threads)
 
