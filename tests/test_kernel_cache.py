@@ -258,19 +258,19 @@ print(json.dumps(sorted(targets)))
 print(json.dumps(sorted(targets & here)))
 """
 ROW_KERNELS = ("_kick_block", "_drift_block", "_row_block", "kick_rows", "drift_rows",
-               "fused_iterate")
+               "fused_iterate", "_tensions")
 PRECOMPILED_RUN = PRECOMPILED_RUN.replace("ROW_KERNELS", repr(ROW_KERNELS))
 
 
-@pytest.mark.parametrize("integrator, expected", [
+@pytest.mark.parametrize("integrator, expected, tensions", [
     ("central-difference", {"_drift_block", "_node_contact", "ply_contact", "segment_contact",
                             "_mid_rotation", "_friction_work", "_body_field_work",
-                            "_travel_from_rows", "stable_step", "travel_step"}),
+                            "_travel_from_rows", "stable_step", "travel_step"}, 1),
     ("phi", {"_row_block", "travel_step", "ply_forces", "ply_update", "node_contact",
-             "segment_contact", "body_update", "step_energy"}),
+             "segment_contact", "body_update", "step_energy"}, 0),
 ])
 def test_a_second_process_compiles_what_the_step_kernel_then_loads(tmp_path, integrator,
-                                                                   expected):
+                                                                   expected, tensions):
     """On a cold cache a run has a second process compile the step kernel's largest callees
     (runner.precompile) into the cache. Their argument types must be the ones the run
     passes, or the run compiles them again: after the second process has finished, a run of a
@@ -292,9 +292,11 @@ def test_a_second_process_compiles_what_the_step_kernel_then_loads(tmp_path, int
     # the loops over row blocks are inlined into the step kernel, never compiled on their own
     # in a run (each would re-optimise and emit its whole row block again); the initial
     # forces (sim.state.update_forces) call the kick's row block with the very types the
-    # central-difference step kernel passes it: one compile of it in all
+    # central-difference step kernel passes it: one compile of it in all. The yarn law
+    # (_tensions) is one specialisation for every caller: compiled once under the kick's row
+    # block, or loaded where the second process compiled it under the φ-update's
     assert counts == {"_kick_block": 1, "_drift_block": 0, "_row_block": 0, "kick_rows": 0,
-                      "drift_rows": 0, "fused_iterate": 0}
+                      "drift_rows": 0, "fused_iterate": 0, "_tensions": tensions}
 
 
 def test_the_second_process_is_started_only_where_it_can_help(monkeypatch):

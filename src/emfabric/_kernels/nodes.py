@@ -418,7 +418,8 @@ def _row_force(j, arr, mat, uni, sourced, grav, prev, buf, ru, rd, mode, inv_dt)
     sfl = NO_STATS
     if sf >= 0:
         sfl = _tensions(prev, (nb, nx, sf, nx), (inv_rest2[sf], rest[sf] ** 2), alpha,
-                        damage_thr, coef, mat, buf, (ru, int64(0)), mode | ALPHA, visc)
+                        damage_thr, coef, mat, buf, (int64(ru), int64(0)), mode | ALPHA,
+                        visc)
     else:
         # the ply's last row: no fill above it (the whole width, so that the first row of the
         # next ply finds no tension from below)
