@@ -3,7 +3,7 @@
 import math
 
 import numpy as np
-from numba import njit
+from numba import int64, njit
 
 from emfabric._kernels.materials import strain_energy_density, stretch_sq
 from emfabric._kernels.records import (
@@ -155,8 +155,9 @@ def fabric_diagnostics(phys, x, v, alpha, centre, direction, out):
         nx = rows[j0, ROW_COUNT]
         sw = rows[j0, ROW_WARP]
         for j in range(j0, j1):
-            stats = _yarn_stats(x, rows[j, ROW_NODE], nx - 1, 1, rows[j, ROW_WARP], alpha, coef,
-                                rest[sw] ** 2, il2[sw], phys.material, stats)
+            # int64(1): a literal 1 would compile _yarn_stats a second time
+            stats = _yarn_stats(x, rows[j, ROW_NODE], nx - 1, int64(1), rows[j, ROW_WARP], alpha,
+                                coef, rest[sw] ** 2, il2[sw], phys.material, stats)
         if j1 - j0 > 1:
             sf = rows[j0, ROW_FILL]
             stats = _yarn_stats(x, rows[j0, ROW_NODE], (j1 - j0 - 1) * nx, nx, sf, alpha,

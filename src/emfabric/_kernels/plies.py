@@ -27,7 +27,7 @@ says why): their reference counts were 11.6 % of a pack-field step, and are gone
 import math
 
 import numpy as np
-from numba import njit
+from numba import int64, njit
 
 from emfabric._kernels.contact import contact_impulse, ply_penalty
 from emfabric._kernels.fields import magnetic_force, node_field_of, uniform_field
@@ -621,7 +621,7 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
     # sweep (rows 0..plies − 1) and in this one (rows plies..): the later sweeps meet only the
     # nodes near them (_pass's hot boxes)
     hot = np.empty((2 * plies, 4), dtype=np.int64)
-    _clear_boxes(hot, 0, 2 * plies)
+    _clear_boxes(hot, int64(0), 2 * plies)  # int64: a literal compiles it once more
     box = np.zeros(9, dtype=np.int64)
     placing = True
     velocity_sweeps = 0
@@ -643,8 +643,9 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
                 # well, but a neighbour met again since could have changed this pair's
                 # plies before and nothing after: a sweep then stopped with the pair below a
                 # held ply at half its speed (tests/test_plies.py)
-                lo = _hot_union(hot, plies, p, box, 5)
-                up = _hot_union(hot, plies, p + 1, box, 1)
+                # int64(): each literal position would compile _hot_union once more
+                lo = _hot_union(hot, plies, p, box, int64(5))
+                up = _hot_union(hot, plies, p + 1, box, int64(1))
                 if not (lo or up):
                     continue
             for s in range(2):
@@ -652,7 +653,9 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
                     _region(nodes, p + s, x, region[p + s])
                     _normals(nodes, p + s, x, nrm, region[p + s])
                     stale[p + s] = 0
-            law_p = (0.0, 0.0, v, driven, placing)
+            # bool(): while its type is inferred, placing is also the literal True, and _pass
+            # would be compiled for that too
+            law_p = (0.0, 0.0, v, driven, bool(placing))
             _pass(phys, p, p + 1, -1.0, x, v, nrm, acc,
                   (law.ply_guess[0], work.ply_near[0], work.ply_memo[0], work.ply_stamp[0],
                    epoch), shares, (region[p], box), law_p)
