@@ -351,6 +351,13 @@ class RowRecords(NamedTuple):
     field: Field
 
 
+def row_records(phys) -> RowRecords:
+    """The RowRecords of a Physics record, built in Python with the types compiled code gives
+    it (for a row-block kernel called from Python or compiled ahead: sim.state.update_forces,
+    the integrators' precompile_targets)."""
+    return RowRecords(phys.nodes, phys.yarns, phys.material, phys.field)
+
+
 class RowArrays(NamedTuple):
     """The arrays the per-row force (nodes._row_force) reads, built once per row block: a
     function bound to a record references and releases every array in it (atomic operations),

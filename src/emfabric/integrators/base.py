@@ -17,6 +17,7 @@ import numpy as np
 from emfabric._kernels import is_compiled, mark_compiled
 from emfabric._kernels.contact import contact_tally
 from emfabric._kernels.nodes import ROWBUF_ROWS, ROWS_PER_BLOCK
+from emfabric._kernels.records import row_records
 from emfabric.sim.fastcall import Direct
 from emfabric.sim.model import Model
 from emfabric.sim.state import State
@@ -160,6 +161,13 @@ class IntegratorBase(ABC):
         serial step kernel, with arguments of the types the step kernel passes them (`state`
         gives the arrays). [] where the scheme names none."""
         return []
+
+    def _serial_rows(self) -> tuple:
+        """(row records, a serial row buffer): the row-block kernels' arguments that
+        precompile_targets passes as the serial step kernel does."""
+        rowbuf = self.rowbuf if self.rowbuf is not None else np.empty((ROWBUF_ROWS,
+                                                                       self.model.nx + 1))
+        return row_records(self.physics), rowbuf
 
     def _compile_target(self, s_in: State, s_out: State, threads: np.ndarray):
         """(dispatcher, arguments) of the threaded step kernel, for its background compile

@@ -26,7 +26,6 @@ from emfabric._kernels.explicit import (
     central_step,
     stable_step,
 )
-from emfabric._kernels.nodes import ROWBUF_ROWS
 from emfabric._kernels.records import make_work, ply_box_size
 from emfabric.integrators.base import IntegratorBase, StepInfo
 from emfabric.sim.fastcall import Direct
@@ -94,14 +93,12 @@ class CentralDifference(IntegratorBase):
         )
         from emfabric._kernels.nodes import ROWS_PER_BLOCK, _drift_block
         from emfabric._kernels.plies import ply_contact
-        from emfabric._kernels.records import BODY_R0, RowRecords
+        from emfabric._kernels.records import BODY_R0
 
         a, phys, work = state.arrays, self.physics, self.work
-        rowbuf = self.rowbuf if self.rowbuf is not None else np.empty((ROWBUF_ROWS,
-                                                                       self.model.nx + 1))
         # the drift's row block (drift_rows is inlined into the step kernel; 0 and
         # ROWS_PER_BLOCK: int64 row bounds, as drift_rows passes them)
-        rec = RowRecords(phys.nodes, phys.yarns, phys.material, phys.field)
+        rec, rowbuf = self._serial_rows()
         out = [(_drift_block, (0, ROWS_PER_BLOCK, rec, a, a, work, 0.0, 0.0, rowbuf)),
                (_node_contact, (phys, a, a, work, 0, 0.0))]
         plies, segs = self.switches

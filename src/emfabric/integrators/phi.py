@@ -115,16 +115,13 @@ class Integrator(IntegratorBase):
         the energy of the accepted step."""
         from emfabric._kernels.body import body_update
         from emfabric._kernels.contact import node_contact, segment_contact
-        from emfabric._kernels.nodes import ROWBUF_ROWS, ROWS_PER_BLOCK, _row_block
+        from emfabric._kernels.nodes import ROWS_PER_BLOCK, _row_block
         from emfabric._kernels.plies import ply_forces
-        from emfabric._kernels.records import RowRecords
         from emfabric._kernels.step import ply_update
 
         a, phys, work = state.arrays, self.physics, self.work
-        rowbuf = self.rowbuf if self.rowbuf is not None else np.empty((ROWBUF_ROWS,
-                                                                       self.model.nx + 1))
         phi, dt, t = self.solver.phi, 0.0, 0.0
-        rec = RowRecords(phys.nodes, phys.yarns, phys.material, phys.field)
+        rec, rowbuf = self._serial_rows()
         out = [(_row_block, (0, ROWS_PER_BLOCK, rec, a.x, a, a, work, t, phi, dt, rowbuf)),
                (travel_step, (phys, a.x, a.v, a.body))]
         plies, segs = self.switches

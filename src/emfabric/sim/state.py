@@ -22,9 +22,9 @@ from emfabric._kernels.records import (
     BODY_W,
     BODY_X,
     ENERGY_TERMS,
-    RowRecords,
     StateArrays,
     make_work,
+    row_records,
 )
 from emfabric.sim.model import Model
 
@@ -182,7 +182,7 @@ def update_forces(model: Model, state: State) -> None:
     # have the types kick_rows gives _kick_block, so this compiles nothing the step kernel
     # does not use (tests/test_kernel_cache.py)
     phys = m.physics
-    rec = RowRecords(phys.nodes, phys.yarns, phys.material, phys.field)
+    rec = row_records(phys)
     rowbuf = np.empty((ROWBUF_ROWS, m.nx + 1))
     ny = int(phys.nodes.ny)
     for j0 in range(0, ny, ROWS_PER_BLOCK):
