@@ -77,6 +77,79 @@ def test_paraview_files_can_be_turned_off(tmp_path):
     assert not list(tmp_path.glob("*.pvd"))
 
 
+def test_vtu_files_written_beside_the_run_are_those_written_in_line(tmp_path, monkeypatch):
+    """A serial run writes its .vtu files from a thread of its own while it steps
+    (io.snapshots): the files, and the .pvd collections listing them, are byte for byte those
+    of the same run writing them in line, and every one is there when the run returns."""
+    import threading
+
+    import emfabric.runner.loop as runner
+    from emfabric.io.snapshots import Snapshots
+
+    sc = make(**{**SMALL, "solver.end_time": 2e-5, "output.snapshot_interval": 1e-6})
+    writers: list[str] = []
+    real = Snapshots._write_vtk
+
+    def record(self, k, snap):
+        writers.append(threading.current_thread().name)
+        return real(self, k, snap)
+
+    monkeypatch.setattr(Snapshots, "_write_vtk", record)
+    beside = run(sc, tmp_path / "beside", threads=1)
+    assert len(writers) == 21 and all(w.startswith("emfabric-vtu") for w in writers)
+
+    class InLine(Snapshots):
+        def __init__(self, *args, background=False, **kwargs):
+            super().__init__(*args, background=False, **kwargs)
+
+    writers.clear()
+    monkeypatch.setattr(runner, "Snapshots", InLine)
+    in_line = run(sc, tmp_path / "in_line", threads=1)
+    assert len(writers) == 21 and set(writers) == {threading.main_thread().name}
+    assert beside.status == in_line.status == "complete"
+    names = sorted(p.name for p in (tmp_path / "in_line" / "vtk").iterdir())
+    assert len(names) == 42  # fabric and projectile, t = 0, 1, ..., 20 µs
+    assert sorted(p.name for p in (tmp_path / "beside" / "vtk").iterdir()) == names
+    for name in names:
+        assert (tmp_path / "beside" / "vtk" / name).read_bytes() == \
+            (tmp_path / "in_line" / "vtk" / name).read_bytes(), name
+    for pvd in ("fabric.pvd", "projectile.pvd"):
+        assert (tmp_path / "beside" / pvd).read_text() == (tmp_path / "in_line" / pvd).read_text()
+
+
+@pytest.mark.parametrize("failing", [5, 41])
+def test_a_vtu_write_that_fails_beside_the_run_stops_it_naming_the_file(tmp_path, monkeypatch,
+                                                                        failing):
+    """A .vtu write that fails in the writing thread (disk full) ends the run as one in line
+    would: "failed", the file named, history.nc readable with that status — also when it is
+    the last snapshot's, whose failure the run learns only after its last step."""
+    import errno
+
+    import emfabric.io.snapshots as snapshots
+    import emfabric.runner.loop as runner
+
+    real = snapshots.meshio.write
+    written = []
+
+    def fill_up(path, mesh, **kwargs):
+        written.append(path)
+        if len(written) == failing:  # fabric_00002.vtu, fabric_00020.vtu (the last)
+            raise OSError(errno.ENOSPC, "No space left on device", str(path))
+        return real(path, mesh, **kwargs)
+
+    monkeypatch.setattr(snapshots.meshio, "write", fill_up)
+    sc = make(**{**SMALL, "solver.end_time": 2e-5, "output.snapshot_interval": 1e-6})
+    name = f"fabric_{(failing - 1) // 2:05d}.vtu"
+    with pytest.raises(runner.OutputError, match=rf"{name}: No space left on device") as info:
+        run(sc, tmp_path, threads=1)
+    assert info.value.result.status == "failed"
+    with xr.open_dataset(tmp_path / "history.nc") as ds:
+        assert ds.attrs["status"] == "failed"
+        assert ds.attrs["end_reason"] == (f"write error: cannot write {name}: No space left "
+                                          "on device")
+        assert ds.sizes["time"] >= 2
+
+
 def test_same_seed_same_history():
     """Same scenario and seed ⇒ bit-identical history; another seed ⇒ another fabric."""
     a = run(make(**SMALL)).history

@@ -14,10 +14,18 @@ The fabric's .vtu files leave out what carries nothing (renumbering the points):
 the point arrays "ply" (1-based: 1 is the top ply), "node_index" (the node's index in
 snapshots.nc), "velocity", "displacement", and the cell arrays "ply" (1-based),
 "segment_index" (the segment's index in snapshots.nc), "damage".
+
+Where the step kernel runs on one thread (``background=True``), the .vtu files of a snapshot
+are written by a thread of their own while the run goes on (the step kernel releases the GIL),
+each still atomically; ``wait()`` returns once every one taken is on disk, raising the first
+write error, and ``flush()`` waits first, so the .pvd collections (and the checkpoint written
+after them) list only files that are there. A threaded step kernel keeps the writes in line:
+a third busy thread would make its barriers wait on the two cores it has.
 """
 
 from __future__ import annotations
 
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -39,16 +47,22 @@ from emfabric.sim.state import State
 
 
 class Snapshots:
-    """The snapshots of one run: each is written to vtk/*.vtu when taken; flush() appends the
-    ones taken since the last flush to snapshots.nc and rewrites the .pvd collections."""
+    """The snapshots of one run: each is written to vtk/*.vtu when taken (by a thread of its
+    own where `background`); flush() appends the ones taken since the last flush to
+    snapshots.nc and rewrites the .pvd collections; close() when the run is done."""
 
     def __init__(self, model: Model, out_dir: Path | None, times: list[float] | None = None,
-                 paraview: bool = True):
+                 paraview: bool = True, background: bool = False):
         """times: the snapshots already on disk (a resumed run); paraview: write the .vtu and
-        .pvd files (output.paraview)."""
+        .pvd files (output.paraview); background: write them beside the run (module
+        docstring)."""
         self.model = model
         self.out_dir = out_dir
         self.paraview = paraview
+        self._writer: ThreadPoolExecutor | None = (
+            ThreadPoolExecutor(1, thread_name_prefix="emfabric-vtu")
+            if background and paraview and out_dir is not None else None)
+        self._writing: list[Future] = []
         self.times: list[float] = list(times or [])
         self.written = len(self.times)
         self._pending: list[tuple[float, np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
@@ -80,8 +94,39 @@ class Snapshots:
         snap = (state.t, state.node_x.T.copy(), state.node_v.T.copy(), state.seg_alpha.copy(),
                 state.body.copy())
         self._pending.append(snap)
-        if self.paraview:
+        if not self.paraview:
+            return
+        if self._writer is None:
             self._write_vtk(len(self.times) - 1, snap)
+            return
+        # a write that failed meanwhile stops the run here, as one in line would have
+        done = [f for f in self._writing if f.done()]
+        self._writing = [f for f in self._writing if not f.done()]
+        for f in done:
+            f.result()
+        self._writing.append(self._writer.submit(self._write_vtk, len(self.times) - 1, snap))
+
+    def wait(self) -> None:
+        """Return once every .vtu file taken so far is written; raise the first write's error
+        (an OSError, as a write in line would)."""
+        writing, self._writing = self._writing, []
+        error: BaseException | None = None
+        for f in writing:
+            exc = f.exception()  # waits
+            if exc is not None and error is None:
+                error = exc
+        if error is not None:
+            raise error
+
+    def close(self) -> None:
+        """Wait for the .vtu writes (errors are the caller's to have seen through wait()) and
+        end the writing thread."""
+        if self._writer is not None:
+            for f in self._writing:
+                f.exception()
+            self._writing = []
+            self._writer.shutdown(wait=True)
+            self._writer = None
 
     def _records(self, attrs: dict[str, str]) -> xr.Dataset:
         m = self.model
@@ -163,6 +208,7 @@ class Snapshots:
         `attrs` by the first) and rewrite the .pvd collections."""
         if self.out_dir is None:
             return
+        self.wait()
         if self._pending:
             path = self.out_dir / "snapshots.nc"
             ds = self._records(attrs)

@@ -159,6 +159,8 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
     wall0 = time.perf_counter()
     options = model.options
     integ = make_integrator(model, threads=threads)
+    # the .vtu files are written beside a serial step kernel (io.snapshots)
+    vtu_beside = not integ.threaded
     # on a cold kernel cache, run serially and compile the threaded kernel beside the run
     deferred = integ.defer_threads()
     second = None  # the process that compiles some kernels beside this one (cold cache)
@@ -179,7 +181,8 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
                     run_attributes(model, "partial", RUNNING, 0.0)), out / "history.nc")
         s_in = initial_state(model)
         recorder = Recorder(plies=model.ply_count)
-        snaps = Snapshots(model, out, paraview=_paraview(model))
+        snaps = Snapshots(model, out, paraview=_paraview(model),
+                          background=vtu_beside)
         measure(model, s_in, recorder.new_row())
         with _signals_deferred(stop=True), _snapshot_naming(out):
             snaps.take(s_in)
@@ -189,7 +192,8 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
     else:
         pos, rows, times = resumed
         recorder = Recorder(rows, model.ply_count)
-        snaps = Snapshots(model, out, times, paraview=_paraview(model))
+        snaps = Snapshots(model, out, times, paraview=_paraview(model),
+                          background=vtu_beside)
         next_snap = pos.next_snapshot
         wall_before = pos.wall_time
         # records and snapshots written after the checkpoint are written again
@@ -224,6 +228,8 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
             else:
                 write_history(history, out / "history.nc")
                 written = recorder.count
+        with _snapshot_naming(out):
+            snaps.wait()  # the .vtu files written beside the run, before the .pvd lists them
         with _naming(out / "snapshots.nc"):
             snaps.flush(attrs)
             if history is not None and (out / "snapshots.nc").is_file():
@@ -293,6 +299,14 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
         except OutputError as exc:
             if error is None:
                 status, reason, error = "failed", exc.reason, exc
+    try:
+        # the .vtu files written beside the run: one that failed is the run's end reason, as
+        # if written in line, before the final history says how the run ended
+        with _signals_deferred(), _snapshot_naming(out):
+            snaps.wait()
+    except OutputError as exc:
+        if error is None:
+            status, reason, error = "failed", exc.reason, exc
     total = wall()
     attrs = run_attributes(model, status, reason, total)
     ds = recorder.to_dataset(attrs)
@@ -314,6 +328,7 @@ def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
                     not mark_status(out / "history.nc", status, reason):
                 log.error("%s still reads status = partial: its end could not be recorded",
                           out / "history.nc")
+    snaps.close()
     result = RunResult(model, s_in, ds, status, reason, total, out)
     result.summary = summarize(result)
     if integ.compiling_in_background and status != "partial":
