@@ -3,6 +3,7 @@
 import subprocess
 import sys
 import tomllib
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -263,6 +264,43 @@ def test_netcdf_files_follow_cf_conventions(tmp_path):
         ds = xr.open_dataset(tmp_path / name)
         assert list(ds["xyz"].values) == ["x", "y", "z"]
         ds["projectile_velocity"].sel(xyz="z")
+
+
+def test_whole_files_read_back_as_xarray_writes_them(tmp_path):
+    """write_netcdf(ds, path) (netCDF-4, checkpoint.nc) goes through xarray's encoding and
+    store without to_netcdf: read back, the file is xarray's own write of the dataset (values,
+    dtypes, fill values, attributes, the char `xyz` label, scalars)."""
+    from emfabric.io.netcdf import write_netcdf, xyz_coordinate
+
+    rng = np.random.default_rng(5)
+    ds = xr.Dataset(
+        {"x": (("node", "xyz"), rng.normal(size=(4, 3)), {"units": "m"}),
+         "n": ((), np.int64(2**40)), "t": ((), np.float64(0.5)),
+         "alpha": (("segment",), np.array([1.0, np.nan, 0.25]))},
+        coords={"xyz": xyz_coordinate()}, attrs={"title": "t", "grid": np.int32([3, 4])})
+    write_netcdf(ds, tmp_path / "ours.nc")
+    ds.to_netcdf(tmp_path / "xarray.nc", engine="netcdf4", format="NETCDF4",
+                 encoding={"xyz": {"dtype": "S1"}})
+    with xr.open_dataset(tmp_path / "ours.nc") as ours, \
+            xr.open_dataset(tmp_path / "xarray.nc") as theirs:
+        xr.testing.assert_identical(ours.load(), theirs.load())
+        for name in theirs.variables:
+            assert ours[name].encoding["dtype"] == theirs[name].encoding["dtype"], name
+            np.testing.assert_equal(ours[name].encoding.get("_FillValue"),
+                                    theirs[name].encoding.get("_FillValue"), err_msg=name)
+
+
+def test_a_run_does_not_import_distributed(tmp_path):
+    """Writing a run's files asks for no dask scheduler: where dask is installed, xarray's
+    to_netcdf would import distributed for it (~0.12 s of every run; io.netcdf)."""
+    pytest.importorskip("distributed")
+    code = ("import sys; from emfabric.runner.loop import run; from conftest import make; "
+            f"run(make(**{dict(SMALL)!r}), {str(tmp_path / 'out')!r}); "
+            "print('distributed' in sys.modules)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       cwd=str(Path(__file__).parent), timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip().splitlines()[-1] == "False"
 
 
 @pytest.mark.parametrize("records", [0, 1, 2, 37])

@@ -21,6 +21,7 @@ import xarray as xr
 
 from emfabric.config.scenario import Scenario, ScenarioError, scenario_from_dict
 from emfabric.io.atomic import write_atomic
+from emfabric.io.netcdf import to_netcdf
 from emfabric.sim.model import Model
 from emfabric.sim.state import State
 
@@ -81,7 +82,7 @@ def write_checkpoint(path: Path, model: Model, state: State, pos: RunPosition) -
     def write_and_check(tmp: Path) -> None:
         import netCDF4
 
-        ds.to_netcdf(tmp, engine="netcdf4", format="NETCDF4")
+        to_netcdf(ds, tmp, "NETCDF4")
         with netCDF4.Dataset(tmp, "r") as nc:  # every variable reads back
             for var in nc.variables.values():
                 var[...]
