@@ -290,17 +290,47 @@ def test_whole_files_read_back_as_xarray_writes_them(tmp_path):
                                     theirs[name].encoding.get("_FillValue"), err_msg=name)
 
 
-def test_a_run_does_not_import_distributed(tmp_path):
-    """Writing a run's files asks for no dask scheduler: where dask is installed, xarray's
-    to_netcdf would import distributed for it (~0.12 s of every run; io.netcdf)."""
+def test_a_run_imports_neither_dask_array_nor_distributed(tmp_path):
+    """Writing a run's files imports no part of dask an array of NumPy does not need: where
+    dask is installed, xarray would import dask.array (with scipy.fft) to ask whether each
+    array is a dask array, and distributed to look for a scheduler (~0.5 s of every run;
+    io.netcdf)."""
     pytest.importorskip("distributed")
     code = ("import sys; from emfabric.runner.loop import run; from conftest import make; "
             f"run(make(**{dict(SMALL)!r}), {str(tmp_path / 'out')!r}); "
-            "print('distributed' in sys.modules)")
+            "print([m for m in ('dask.array', 'distributed') if m in sys.modules])")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                        cwd=str(Path(__file__).parent), timeout=600)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.strip().splitlines()[-1] == "False"
+    assert r.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_xarray_sees_dask_arrays_made_after_emfabric_wrote_files(tmp_path):
+    """io.netcdf answers xarray's "is it a dask array?" without importing dask.array only
+    while dask.array is not imported: arrays made after it is, in the same process, are
+    dask arrays to xarray as always (chunks, version, lazy compute)."""
+    pytest.importorskip("dask.array")
+    code = f"""
+import sys
+import numpy as np
+import xarray as xr
+from emfabric.io.netcdf import write_netcdf
+write_netcdf(xr.Dataset({{"a": (("n",), np.arange(3.0))}}), {str(tmp_path / "a.nc")!r})
+assert "dask.array" not in sys.modules
+import dask
+import dask.array as da
+from xarray.namedarray import pycompat
+v = xr.DataArray(da.ones(4, chunks=2), dims="n")
+assert v.chunks == ((2, 2),), v.chunks
+assert isinstance(v.data, da.Array) and float(v.sum().compute()) == 4.0
+assert pycompat.array_type("dask") == (da.Array,)
+assert str(pycompat.mod_version("dask")) == dask.__version__
+print("ok")
+"""
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "ok"
 
 
 @pytest.mark.parametrize("records", [0, 1, 2, 37])

@@ -17,15 +17,19 @@
 - Every variable has `units` and `long_name`; the global attributes say what made the file
   (`source`, the package version, the full scenario) and what it implements (`references`).
 
-- The files are written through xarray's encoding and netCDF4 store, as `Dataset.to_netcdf`
-  writes them, but without its look for an active dask scheduler (`to_netcdf` below): where
-  dask is installed (the `studies` extra) that look imports distributed, ~0.12 s of every
-  run, for files that hold NumPy arrays only.
+- Where dask is installed (the `studies` extra), writing a run's files imported dask.array
+  (with scipy.fft) and distributed, ~0.5 s of every run, for files that hold NumPy arrays
+  only: xarray asks of each array it wraps whether it is a dask array, importing dask.array
+  to ask, and `Dataset.to_netcdf` looks for an active dask scheduler. The files are written
+  through xarray's encoding and netCDF4 store as to_netcdf writes them, less the look
+  (`to_netcdf` below), and `_DaskArrayType` answers the question without the import while
+  dask.array is not imported (nothing can be a dask array then).
 """
 
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Hashable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -34,6 +38,49 @@ import numpy as np
 import xarray as xr
 
 from emfabric.io.atomic import write_atomic
+
+
+class _DaskArrayType:
+    """xarray's record of dask as an array library (xarray.namedarray.pycompat's
+    DuckArrayModule("dask"), which imports dask.array when made) made only when something
+    needs more than the array type while dask.array is not imported: `type` is () then, as an
+    object can be a dask array only once dask.array is imported. Anything else (`module`,
+    `version`, `available`), or `type` once dask.array is imported, makes xarray's own record,
+    which then replaces this one."""
+
+    def __init__(self, cache: dict, make: type):
+        self._cache, self._make = cache, make
+
+    def _real(self):
+        real = self._make("dask")
+        if self._cache.get("dask") is self:
+            self._cache["dask"] = real
+        return real
+
+    @property
+    def type(self) -> tuple:
+        if "dask.array" not in sys.modules:
+            return ()
+        return self._real().type
+
+    def __getattr__(self, name: str):
+        return getattr(self._real(), name)
+
+
+def _ask_dask_only_once_imported() -> None:
+    """Put _DaskArrayType in xarray's cache of array libraries (unless xarray keeps it
+    otherwise, or already holds dask's record)."""
+    try:
+        from xarray.namedarray import pycompat
+    except ImportError:  # another xarray layout: it keeps its own behaviour
+        return
+    cache = getattr(pycompat, "_cached_duck_array_modules", None)
+    make = getattr(pycompat, "DuckArrayModule", None)
+    if isinstance(cache, dict) and make is not None and "dask" not in cache:
+        cache["dask"] = _DaskArrayType(cache, make)
+
+
+_ask_dask_only_once_imported()
 
 CONVENTIONS = "CF-1.8"
 REFERENCES = ('T. I. Zohdi, "High-speed impact of electromagnetically sensitive fabric and '
