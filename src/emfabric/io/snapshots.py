@@ -20,7 +20,7 @@ are written by a thread of their own while the run goes on (the step kernel rele
 each still atomically; ``wait()`` returns once every one taken is on disk, raising the first
 write error, and ``flush()`` waits first, so the .pvd collections (and the checkpoint written
 after them) list only files that are there. A threaded step kernel keeps the writes in line:
-a third busy thread would make its barriers wait on the two cores it has.
+a busy thread beside it would make its barriers wait for a descheduled thread.
 """
 
 from __future__ import annotations
