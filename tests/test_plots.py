@@ -137,6 +137,26 @@ def test_sequence_colour_bar_spans_the_damage_shown(field_run):
         assert f"ψ = {plots.snapshot_yaw_deg(s, int(k)):.2f}°" in ax.get_title()
 
 
+def test_sequence_pdf_holds_the_yarns_as_one_image_per_view(field_run, tmp_path):
+    """In the PDF the yarns of each view are an embedded image (rasterized), not one vector
+    path per segment; the axes and the projectile stay vector: the PDF has no more paths than
+    the views' other artists need, whatever the sheet's size."""
+    import matplotlib
+
+    with plots.open_snapshots(field_run) as s:
+        fig = plots.sequence_figure(s, count=2)
+        segments = len(plots.shown_segments(s))
+    views = [ax for ax in fig.axes if isinstance(ax, Axes3D)]
+    assert all(ax.collections[0].get_rasterized() for ax in views)
+    assert not any(c.get_rasterized() for ax in views for c in ax.collections[1:])
+    with matplotlib.rc_context({**plots.STYLE, "pdf.compression": 0}):  # readable streams
+        fig.savefig(tmp_path / "seq.pdf")
+    pdf = (tmp_path / "seq.pdf").read_bytes()
+    assert pdf.count(b"/Subtype /Image") >= len(views)
+    # drawn as paths, each view's segments would be a move-to ("x y m") each
+    assert pdf.count(b" m\n") + pdf.count(b" m ") < segments
+
+
 def test_snapshot_yaw_from_the_rotation_equals_the_history(field_run):
     """ψ of a snapshot from its rotation and velocity is the history's yaw at that time."""
     h = plots.open_history(field_run)
