@@ -41,6 +41,7 @@ from emfabric._kernels.materials import (
     ksv_tangent,
     stretch_sq,
 )
+from emfabric._kernels.reductions import from_key, lane_sums, order_key
 from emfabric._kernels.records import (
     DIAG_AHEAD_MAX,
     DIAG_AHEAD_MIN,
@@ -197,18 +198,20 @@ def _segment_stats(buf, s, coef, rest2, mat, count):
             u = uint64(i)
             buf[ROW_SEGMENT_ENERGY, u] = (buf[ROW_STRESS, u] * coef[uint64(s + i)] * rest2
                                           * ksv_energy(buf[ROW_STRETCH_SQ, u]))
-    u2max = 0.0
-    broken = 0.0
-    amin = 1.0
+    # the extremes over integer keys, the count as an integer: one branch-free loop that
+    # vectorises (reductions.py); U² ≥ 0 and α ≥ 0, so the keys of 0 and 1 start them
+    ku2 = order_key(0.0)
+    kamin = order_key(1.0)
+    broken = 0
     for i in range(count):
         u = uint64(i)
         a = buf[ROW_STRESS, u]
-        if a >= bb:
-            u2max = max(u2max, buf[ROW_STRETCH_SQ, u])
-        else:
-            broken += 1.0
-        amin = min(amin, a)
-    return u2max, _buf_total(buf, ROW_SEGMENT_ENERGY, count), broken, amin
+        intact = a >= bb
+        ku2 = max(ku2, order_key(buf[ROW_STRETCH_SQ, u]) if intact else ku2)
+        broken += 0 if intact else 1
+        kamin = min(kamin, order_key(a))
+    return (from_key(ku2), _buf_total(buf, ROW_SEGMENT_ENERGY, count), float(broken),
+            from_key(kamin))
 
 
 @njit(cache=True, _nrt=False)
@@ -645,11 +648,12 @@ def _rotate_row(nb, count, inv_mass, charge, uni, sourced, nf, x, tau, v, vat, b
         buf[ROW_PROJECTION, u] = (buf[ROW_ROTATION, u] * buf[ROW_ROTATION, u]
                                   + buf[ROW_ROTATION + 1, u] * buf[ROW_ROTATION + 1, u]
                                   + buf[ROW_ROTATION + 2, u] * buf[ROW_ROTATION + 2, u])
-    # the largest apart: a max in the loop above keeps it from being vectorised (without
-    # fast-math the compiler may not reorder a select-based maximum)
-    big = 0.0
+    # the largest apart, over integer keys (reductions.py: a maximum of doubles is not
+    # vectorised, in this loop or in the one above)
+    kbig = order_key(0.0)
     for i in range(count):
-        big = max(big, buf[ROW_PROJECTION, uint64(i)])
+        kbig = max(kbig, order_key(buf[ROW_PROJECTION, uint64(i)]))
+    big = from_key(kbig)
     if big == 0.0:
         return
     if big < TAN_SERIES_LIMIT:
@@ -705,20 +709,11 @@ def rodrigues(v, q_over_m, b, h):
 
 @njit(cache=True, inline="always")
 def _buf_total(buf, r, count):
-    """Σ buf[r, :count] in a fixed order: four interleaved partial sums, as _row_sums (unsigned
-    indices: no view)."""
-    s0 = s1 = s2 = s3 = 0.0
-    i = 0
-    while i + 3 < count:
-        u = uint64(i)
-        s0 += buf[r, u]
-        s1 += buf[r, u + uint64(1)]
-        s2 += buf[r, u + uint64(2)]
-        s3 += buf[r, u + uint64(3)]
-        i += 4
-    while i < count:
+    """Σ buf[r, :count] in a fixed order: four interleaved partial sums, as _row_sums, the
+    first taking the last count mod 4 (reductions.lane_sums: in a vector register)."""
+    s0, s1, s2, s3 = lane_sums(buf, r, count)
+    for i in range(count - count % 4, count):
         s0 += buf[r, uint64(i)]
-        i += 1
     return (s0 + s1) + (s2 + s3)
 
 
@@ -831,10 +826,11 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
             u = uint64(i)
             ksum = (buf[RKW, u] + buf[RKW, u + uint64(1)]) + (buf[rku, u] + buf[rkd, u])
             buf[ROW_PROJECTION, u] = 2.0 * ksum * inv_mass[uint64(nb + i)]
-        worst = 0.0  # the largest apart, as in _rotate_row (ROW_PROJECTION is scratch here)
+        # the largest apart, over integer keys as in _rotate_row (ROW_PROJECTION is scratch)
+        kworst = order_key(0.0)
         for i in range(nx):
-            worst = max(worst, buf[ROW_PROJECTION, uint64(i)])
-        sums[SUM_STIFFNESS, j] = worst
+            kworst = max(kworst, order_key(buf[ROW_PROJECTION, uint64(i)]))
+        sums[SUM_STIFFNESS, j] = from_key(kworst)
         # the work of the yarn force over the placement of the candidates (central_step); the
         # field's and gravity's are booked from the kicks' velocities, which see no placement
         proj = 0.0
@@ -932,47 +928,48 @@ def _node_stats(nb, count, mass, x, v, xref, frame, buf, sums, j):
         buf[rd + 4, u] = mi * (py * vz - pz * vy)
         buf[rd + 5, u] = mi * (pz * vx - px * vz)
         buf[rd + 6, u] = mi * (px * vy - py * vx)
-    defl = 0.0
-    ahead_min = math.inf
-    ahead_max = -math.inf
-    approach = -math.inf
-    recede = -math.inf
-    fastest = 0.0
-    lox = loy = loz = math.inf
-    hix = hiy = hiz = -math.inf
+    # the extremes over integer keys (reductions.py): the loop vectorises, where twelve maxima
+    # and minima of doubles were one scalar compare after another (~20 % of the kick)
+    low = order_key(math.inf)
+    high = order_key(-math.inf)
+    kdefl = kfast = order_key(0.0)
+    kamin, kamax, kapp, krec = low, high, high, high
+    klox = kloy = kloz = low
+    khix = khiy = khiz = high
     for i in range(count):
         k = uint64(nb + i)
         vx, vy, vz = v[0, k], v[1, k], v[2, k]
-        defl = max(defl, abs(x[2, k] - xref[2, k]))
-        s = (x[0, k] - cx) * dx + (x[1, k] - cy) * dy + (x[2, k] - cz) * dz
-        ahead_min = min(ahead_min, s)
-        ahead_max = max(ahead_max, s)
+        kdefl = max(kdefl, order_key(abs(x[2, k] - xref[2, k])))
+        ks = order_key((x[0, k] - cx) * dx + (x[1, k] - cy) * dy + (x[2, k] - cz) * dz)
+        kamin = min(kamin, ks)
+        kamax = max(kamax, ks)
         vd = vx * dx + vy * dy + vz * dz
-        approach = max(approach, -vd)
-        recede = max(recede, vd)
-        fastest = max(fastest, buf[ROW_VEL_EXPLICIT, uint64(i)])
-        lox = min(lox, vx)
-        loy = min(loy, vy)
-        loz = min(loz, vz)
-        hix = max(hix, vx)
-        hiy = max(hiy, vy)
-        hiz = max(hiz, vz)
+        kapp = max(kapp, order_key(-vd))
+        krec = max(krec, order_key(vd))
+        kfast = max(kfast, order_key(buf[ROW_VEL_EXPLICIT, uint64(i)]))
+        kx, ky, kz = order_key(vx), order_key(vy), order_key(vz)
+        klox = min(klox, kx)
+        kloy = min(kloy, ky)
+        kloz = min(kloz, kz)
+        khix = max(khix, kx)
+        khiy = max(khiy, ky)
+        khiz = max(khiz, kz)
     d = SUM_DIAG
     for c in range(7):
         sums[d + DIAG_KE + c, j] = _buf_total(buf, rd + c, count)
-    sums[d + DIAG_DEFLECTION, j] = defl
-    sums[d + DIAG_AHEAD_MIN, j] = ahead_min
-    sums[d + DIAG_AHEAD_MAX, j] = ahead_max
-    sums[d + DIAG_APPROACH_MAX, j] = approach
-    sums[d + DIAG_RECEDE_MAX, j] = recede
+    sums[d + DIAG_DEFLECTION, j] = from_key(kdefl)
+    sums[d + DIAG_AHEAD_MIN, j] = from_key(kamin)
+    sums[d + DIAG_AHEAD_MAX, j] = from_key(kamax)
+    sums[d + DIAG_APPROACH_MAX, j] = from_key(kapp)
+    sums[d + DIAG_RECEDE_MAX, j] = from_key(krec)
     m = SUM_MOTION
-    sums[m, j] = fastest
-    sums[m + 1, j] = lox
-    sums[m + 2, j] = loy
-    sums[m + 3, j] = loz
-    sums[m + 4, j] = hix
-    sums[m + 5, j] = hiy
-    sums[m + 6, j] = hiz
+    sums[m, j] = from_key(kfast)
+    sums[m + 1, j] = from_key(klox)
+    sums[m + 2, j] = from_key(kloy)
+    sums[m + 3, j] = from_key(kloz)
+    sums[m + 4, j] = from_key(khix)
+    sums[m + 5, j] = from_key(khiy)
+    sums[m + 6, j] = from_key(khiz)
 
 
 @njit(cache=True, inline="always")
