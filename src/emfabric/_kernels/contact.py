@@ -11,7 +11,7 @@ velocity (4.10–4.11). The body receives −J at the contact point.
 
 import math
 
-from numba import njit
+from numba import njit, uint64
 
 from emfabric._kernels.records import (
     BODY_R0,
@@ -22,6 +22,7 @@ from emfabric._kernels.records import (
     SUM_ERROR_DEN,
     SUM_ERROR_NUM,
 )
+from emfabric._kernels.reductions import SCAN_BLOCK
 from emfabric._kernels.shapes import (
     bounding_radius,
     contact_margin,
@@ -139,16 +140,27 @@ def find_candidates(x, inv_mass, centre, reach, cand, flag):
     """Free nodes within `reach` of the body centre; returns their count."""
     count = 0
     r2 = reach * reach
-    for n in range(x.shape[1]):
-        dx = x[0, n] - centre[0]
-        dy = x[1, n] - centre[1]
-        dz = x[2, n] - centre[2]
-        if inv_mass[n] > 0.0 and dx * dx + dy * dy + dz * dz < r2:
-            cand[count] = n
-            flag[n] = 1
-            count += 1
-        else:
-            flag[n] = 0
+    cx, cy, cz = centre[0], centre[1], centre[2]
+    nodes = x.shape[1]
+    for b0 in range(0, nodes, SCAN_BLOCK):
+        b1 = min(nodes, b0 + SCAN_BLOCK)
+        # the flags, and how many are set, in a loop that vectorises; the candidates listed
+        # only from blocks that have any (reductions.SCAN_BLOCK)
+        near = 0
+        for n in range(b0, b1):
+            u = uint64(n)
+            dx = x[0, u] - cx
+            dy = x[1, u] - cy
+            dz = x[2, u] - cz
+            hit = (inv_mass[u] > 0.0) & (dx * dx + dy * dy + dz * dz < r2)
+            flag[u] = 1 if hit else 0
+            near += 1 if hit else 0
+        if near == 0:
+            continue
+        for n in range(b0, b1):
+            if flag[n] != 0:
+                cand[count] = n
+                count += 1
     return count
 
 

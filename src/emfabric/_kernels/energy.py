@@ -12,7 +12,7 @@ the work of the step's last stretch that the update never paid (damage_release).
 """
 
 
-from numba import njit
+from numba import njit, uint64
 
 from emfabric._kernels.fields import (
     field_at,
@@ -33,6 +33,7 @@ from emfabric._kernels.records import (
     ENERGY_WORK_FIELD,
     ENERGY_WORK_GRAVITY,
 )
+from emfabric._kernels.reductions import SCAN_BLOCK
 from emfabric._kernels.vec3 import cross, dot, mat_vec, vec
 
 
@@ -130,9 +131,20 @@ def damage_release(yarns, mat, x0, x, alpha_before, alpha_after, weight):
     O(Δt²)."""
     d_dam = 0.0
     ends, rest, coef = yarns.ends, yarns.rest_length, yarns.stiffness
-    for s in range(alpha_before.shape[0]):
-        drop = alpha_before[s] - alpha_after[s]
-        if drop > 0.0:
+    count = alpha_before.shape[0]
+    for b0 in range(0, count, SCAN_BLOCK):
+        b1 = min(count, b0 + SCAN_BLOCK)
+        # the block's segments whose α fell, counted in a loop that vectorises: most blocks
+        # of most steps have none (reductions.SCAN_BLOCK)
+        fell = 0
+        for s in range(b0, b1):
+            fell += 1 if alpha_after[uint64(s)] < alpha_before[uint64(s)] else 0
+        if fell == 0:
+            continue
+        for s in range(b0, b1):
+            drop = alpha_before[s] - alpha_after[s]
+            if not drop > 0.0:
+                continue
             a = ends[s, 0]
             b = ends[s, 1]
             dx = x[0, b] - x[0, a]

@@ -36,7 +36,7 @@ State's fv for the first), as viscous dissipation.
 
 import math
 
-from numba import njit
+from numba import njit, uint64
 
 from emfabric._kernels.body import BODY_ITERATION_LIMIT, field_wrench
 from emfabric._kernels.contact import (
@@ -90,6 +90,7 @@ from emfabric._kernels.records import (
     SUM_WORK_GRAVITY,
     SUM_WORK_VISCOUS,
 )
+from emfabric._kernels.reductions import from_key, order_key
 from emfabric._kernels.shapes import (
     bounding_radius,
     contact_margin,
@@ -372,9 +373,13 @@ def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol
     nseg = 0
     flag = work.flag
     if body.active:
-        vmax = 0.0
-        for n in range(sin.x.shape[1]):
-            vmax = max(vmax, sin.v[0, n] ** 2 + sin.v[1, n] ** 2 + sin.v[2, n] ** 2)
+        # the largest |v|², over integer keys (a loop that vectorises: reductions.py)
+        kv = order_key(0.0)
+        v0 = sin.v
+        for n in range(v0.shape[1]):
+            u = uint64(n)
+            kv = max(kv, order_key(v0[0, u] ** 2 + v0[1, u] ** 2 + v0[2, u] ** 2))
+        vmax = from_key(kv)
         radius = bounding_radius(body)
         speed = norm(b_in[BODY_V]) + radius * norm(b_in[BODY_W])
         reach = 1.05 * radius + 2.0 * dt * (speed + math.sqrt(vmax))
@@ -401,9 +406,10 @@ def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol
     w_grav = _sum_rows(sums[SUM_WORK_GRAVITY], ny)
     viscous = phys.yarns.damping.size > 0
     w_visc = _sum_rows(sums[SUM_WORK_VISCOUS], ny) if viscous else 0.0
-    for n in range(sout.contact.shape[1]):
-        for c in range(4):
-            sout.contact[c, n] = 0.0
+    contact = sout.contact
+    for c in range(4):  # row by row: contiguous stores
+        for n in range(contact.shape[1]):
+            contact[c, uint64(n)] = 0.0
     # body: half kick of V and H, the drift of the centre and the rotation
     scratch = work.body_scratch
     reaction = work.reaction

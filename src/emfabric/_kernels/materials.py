@@ -8,9 +8,10 @@ With ``Yarns.stiffness`` = 𝔼·A0/L0 (or c·A0/L0), t_s = stiffness·α·stres
 
 import math
 
-from numba import njit
+from numba import njit, uint64
 
 from emfabric._kernels.records import DAMAGE_BRITTLE, MATERIAL_FUNG
+from emfabric._kernels.reductions import SCAN_BLOCK
 
 
 @njit(cache=True, inline="always")
@@ -106,7 +107,22 @@ def damage_thresholds(alpha, mat, fail2, out, done):
     u_crit = mat.critical_stretch
     rate = mat.damage_rate
     brittle = mat.damage_law == DAMAGE_BRITTLE
-    for s in range(alpha.shape[0]):
+    count = alpha.shape[0]
+    for b0 in range(0, count, SCAN_BLOCK):
+        b1 = min(count, b0 + SCAN_BLOCK)
+        # the block's segments whose α changed, counted in a loop that vectorises (most steps
+        # change none: reductions.SCAN_BLOCK)
+        changed = 0
+        for s in range(b0, b1):
+            changed += 1 if alpha[uint64(s)] != done[uint64(s)] else 0
+        if changed != 0:
+            _block_thresholds(b0, b1, alpha, u_crit, rate, brittle, fail2, out, done)
+
+
+@njit(cache=True, inline="always")
+def _block_thresholds(b0, b1, alpha, u_crit, rate, brittle, fail2, out, done):
+    """damage_thresholds of segments b0 ≤ s < b1."""
+    for s in range(b0, b1):
         a = alpha[s]
         if a == done[s]:
             continue

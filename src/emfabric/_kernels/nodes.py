@@ -41,7 +41,6 @@ from emfabric._kernels.materials import (
     ksv_tangent,
     stretch_sq,
 )
-from emfabric._kernels.reductions import from_key, lane_sums, order_key
 from emfabric._kernels.records import (
     DIAG_AHEAD_MAX,
     DIAG_AHEAD_MIN,
@@ -71,6 +70,7 @@ from emfabric._kernels.records import (
     RowArrays,
     RowRecords,
 )
+from emfabric._kernels.reductions import from_key, lane_sums, order_key
 
 
 @njit(cache=True)

@@ -23,6 +23,11 @@ from numba import njit, types
 from numba.core import cgutils
 from numba.extending import intrinsic
 
+SCAN_BLOCK = 64
+"""Entries a sparse scan counts at once (a count vectorises; the block is then searched only where
+the count is not zero): the passes over every node or segment of a step that look for the few
+that matter (contact candidates, a node inside the body, damage that fell)."""
+
 MAGNITUDE = 0x7FFFFFFFFFFFFFFF
 """The bits of a double without its sign."""
 

@@ -23,7 +23,7 @@ g = |(max(s − L + L_n, 0), ρ + ϱ − R)| − ϱ (which is ρ − R below the
 
 import math
 
-from numba import njit
+from numba import njit, uint64
 
 from emfabric._kernels.records import (
     BODY_R0,
@@ -33,6 +33,7 @@ from emfabric._kernels.records import (
     SHAPE_OGIVE,
     SHAPE_SPHERE,
 )
+from emfabric._kernels.reductions import SCAN_BLOCK
 from emfabric._kernels.vec3 import from_shape_frame, to_shape_frame
 
 
@@ -214,7 +215,30 @@ def nodes_inside(x, inv_mass, flag, body, b_state):
     centre = b_state[BODY_X]
     rot = b_state[BODY_R0:BODY_R0 + 3]
     r2 = bounding_radius(body) ** 2
-    for n in range(x.shape[1]):
+    cx, cy, cz = centre[0], centre[1], centre[2]
+    nodes = x.shape[1]
+    for b0 in range(0, nodes, SCAN_BLOCK):
+        b1 = min(nodes, b0 + SCAN_BLOCK)
+        # free nodes of the block that are no candidates and within the bounding sphere,
+        # counted in a loop that vectorises (reductions.SCAN_BLOCK): almost always none
+        near = 0
+        for n in range(b0, b1):
+            u = uint64(n)
+            dx = x[0, u] - cx
+            dy = x[1, u] - cy
+            dz = x[2, u] - cz
+            near += 1 if ((flag[u] == 0) & (inv_mass[u] > 0.0)
+                          & (dx * dx + dy * dy + dz * dz <= r2)) else 0
+        if near != 0:
+            count += _inside_in(b0, b1, x, inv_mass, flag, body, centre, rot, r2)
+    return count
+
+
+@njit(cache=True, inline="always")
+def _inside_in(b0, b1, x, inv_mass, flag, body, centre, rot, r2):
+    """nodes_inside's count over nodes b0 ≤ n < b1."""
+    count = 0
+    for n in range(b0, b1):
         if flag[n] == 0 and inv_mass[n] > 0.0:
             d = (x[0, n] - centre[0], x[1, n] - centre[1], x[2, n] - centre[2])
             # outside the bounding sphere is outside the body: the shape's test only within
