@@ -206,9 +206,9 @@ def _segment_stats(buf, s, coef, rest2, mat, count):
     for i in range(count):
         u = uint64(i)
         a = buf[ROW_STRESS, u]
-        intact = a >= bb
-        ku2 = max(ku2, order_key(buf[ROW_STRETCH_SQ, u]) if intact else ku2)
-        broken += 0 if intact else 1
+        intact = int64(a >= bb)  # 1 or 0, arithmetic rather than a branch: it vectorises
+        ku2 = max(ku2, order_key(buf[ROW_STRETCH_SQ, u]) * intact)
+        broken += 1 - intact
         kamin = min(kamin, order_key(a))
     return (from_key(ku2), _buf_total(buf, ROW_SEGMENT_ENERGY, count), float(broken),
             from_key(kamin))
@@ -834,7 +834,11 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
         # the work of the yarn force over the placement of the candidates (central_step); the
         # field's and gravity's are booked from the kicks' velocities, which see no placement
         proj = 0.0
+        # the row's candidates counted first, in a loop that vectorises: most rows have none
+        held = 0
         for i in range(nx):
+            held += 1 if flag[uint64(nb + i)] != 0 else 0
+        for i in range(nx if held != 0 else 0):
             n = nb + i
             if flag[n] != 0:
                 ee, _b = node_field_of(uni, sourced, nf, n, (x1[0, n], x1[1, n], x1[2, n]))
