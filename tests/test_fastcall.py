@@ -137,6 +137,38 @@ def test_arguments_that_change_every_call_are_still_checked():
     assert direct.dispatched == 2
 
 
+class Scalars(NamedTuple):
+    t: float
+    n: int
+    ok: bool
+
+
+@numba.njit
+def scaled(x, s):
+    return weighted(x, x, s.t * s.n) if s.ok else 0.0
+
+
+def test_a_tuple_of_numbers_built_per_call_is_checked_inline():
+    """A record of scalars rebuilt every call (the step's statistics) is matched by its class
+    and its elements' types in the generated check, not by type_spec on every call; a float
+    where the int was, an int beyond int64 or another class still go to the dispatcher."""
+    direct = Direct(scaled)
+    for k in range(8):
+        s = Scalars(0.5 + k, 3 + k, True)
+        assert _same(direct(None, X, s), scaled(X, s))
+    assert direct.dispatched == 1
+    (entry,) = direct.entries[None]
+    assert "type_spec" not in entry.accepts.__code__.co_names
+    assert not entry.accepts((X, Scalars(0.5, 3.0, True)))
+    assert not entry.accepts((X, Scalars(0.5, 2**63, True)))
+    assert not entry.accepts((X, (0.5, 3, True)))
+    assert not entry.accepts((X, Scalars(0.5, 3, 1)))
+    assert entry.accepts((X, Scalars(1e300, -(2**63), False)))
+    # the dispatcher's own answer for the refused ones (a new specialisation or its error)
+    for s in (Scalars(0.5, 3.0, True), (0.5, 3, True)):
+        assert _outcome(direct, None, X, s) == _outcome(scaled, X, s)
+
+
 VALUES = [X, X.astype(np.float32), X[::2], X.reshape(5, 10), np.asfortranarray(X.reshape(5, 10)),
           X.reshape(5, 10)[:, ::2], np.zeros(3, dtype=np.int64), np.zeros((1, 3)),
           np.zeros((3, 1)), 1.0, 2, True, None, 1j, np.float32(1.0), np.int64(3),

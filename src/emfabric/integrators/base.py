@@ -142,7 +142,8 @@ class IntegratorBase(ABC):
             segments = self._tally(None, nc, work.c_node, work.c_node2,
                                    self.model.nodes.ply_nodes, self._mark,
                                    self.contacts_per_ply)
-        s_out.contact_count = int(self.contacts_per_ply.sum())
+        per_ply = self.contacts_per_ply  # one ply: its count (no NumPy reduction a step)
+        s_out.contact_count = int(per_ply[0] if per_ply.shape[0] == 1 else per_ply.sum())
         s_out.contact_segments = int(segments)
         self._tallied = (s_out, s_out.steps)
 

@@ -248,13 +248,15 @@ def through_the_pack(model: Model, state: State, check_every: int = 1) -> bool:
     `check_every` force evaluations (the stop is then at most that many steps late)."""
     if not model.has_body:
         return False
+    # the step count first: it is the cheapest test, and the result does not depend on the
+    # order of the tests (each alone says False)
+    if check_every > 1 and int(state.evaluations) % check_every:
+        return False
     d = model.flight_direction
     vb = float(state.body_v @ d)
     clear = 1.05 * model.geometry.bound
     back = float(model.nodes.x0[2, model.nodes.ply_nodes[-2]])
     if not vb > 0.0 or float((state.body_x - np.array([0.0, 0.0, back])) @ d) <= clear:
-        return False
-    if check_every > 1 and int(state.evaluations) % check_every:
         return False
     held = held_nodes(model, state.seg_alpha)
     if not held.any():

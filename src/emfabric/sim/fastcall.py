@@ -69,6 +69,16 @@ def type_spec(a: Any) -> Any:
     return None
 
 
+def _scalar_items(spec: Any) -> tuple | None:
+    """The element types of a tuple's spec whose elements are all numbers, bools or None
+    (their specs are their types), else None."""
+    if (isinstance(spec, tuple) and len(spec) == 2 and isinstance(spec[0], type)
+            and issubclass(spec[0], tuple) and isinstance(spec[1], tuple)
+            and all(isinstance(x, type) for x in spec[1])):
+        return spec[1]
+    return None
+
+
 def _same_items(a: tuple, known: Any) -> bool:
     """Whether tuple `a` is of the class of `known` and holds its very objects."""
     return (type(a) is type(known) and len(a) == len(known)
@@ -118,6 +128,20 @@ class _Entry:
                                                     for m in range(size)] or ["True"]) + ")")
                 terms.append(f"(type({a}) is c{i} and len({a}) == {size} and "
                              f"({' or '.join(alts)}))")
+            elif _scalar_items(spec) is not None:
+                # a tuple of numbers rebuilt per call (a record of the step's scalars): the
+                # class and each element's type, as type_spec would compare them, inline
+                items = _scalar_items(spec)
+                ns[f"c{i}"] = spec[0]
+                checks = [f"type({a}) is c{i}", f"len({a}) == {len(items)}"]
+                for m, t in enumerate(items):
+                    if t is int:
+                        checks.append(f"(type({a}[{m}]) is int and "
+                                      f"{INT64_MIN} <= {a}[{m}] <= {INT64_MAX})")
+                    else:
+                        ns[f"t{i}_{m}"] = t
+                        checks.append(f"type({a}[{m}]) is t{i}_{m}")
+                terms.append("(" + " and ".join(checks) + ")")
             else:
                 ns[f"s{i}"] = spec
                 terms.append(f"type_spec({a}) == s{i}")
