@@ -31,7 +31,7 @@ from emfabric._kernels.shapes import (
     thinnest_radius,
 )
 from emfabric._kernels.sums import fsum
-from emfabric._kernels.vec3 import cross, norm
+from emfabric._kernels.vec3 import cross, distance_sq, norm
 
 STICK, SLIDE = 2, 3
 """work.flag of a node in contact at the latest iterate: sticking, sliding (0: no candidate,
@@ -140,7 +140,7 @@ def find_candidates(x, inv_mass, centre, reach, cand, flag):
     """Free nodes within `reach` of the body centre; returns their count."""
     count = 0
     r2 = reach * reach
-    cx, cy, cz = centre[0], centre[1], centre[2]
+    c = (centre[0], centre[1], centre[2])
     nodes = x.shape[1]
     for b0 in range(0, nodes, SCAN_BLOCK):
         b1 = min(nodes, b0 + SCAN_BLOCK)
@@ -149,10 +149,7 @@ def find_candidates(x, inv_mass, centre, reach, cand, flag):
         near = 0
         for n in range(b0, b1):
             u = uint64(n)
-            dx = x[0, u] - cx
-            dy = x[1, u] - cy
-            dz = x[2, u] - cz
-            hit = (inv_mass[u] > 0.0) & (dx * dx + dy * dy + dz * dz < r2)
+            hit = (inv_mass[u] > 0.0) & (distance_sq(x, u, c) < r2)
             flag[u] = 1 if hit else 0
             near += 1 if hit else 0
         if near == 0:

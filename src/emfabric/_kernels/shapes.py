@@ -34,7 +34,7 @@ from emfabric._kernels.records import (
     SHAPE_SPHERE,
 )
 from emfabric._kernels.reductions import SCAN_BLOCK
-from emfabric._kernels.vec3 import from_shape_frame, to_shape_frame
+from emfabric._kernels.vec3 import distance_sq, from_shape_frame, to_shape_frame
 
 
 @njit(cache=True, inline="always")
@@ -215,7 +215,7 @@ def nodes_inside(x, inv_mass, flag, body, b_state):
     centre = b_state[BODY_X]
     rot = b_state[BODY_R0:BODY_R0 + 3]
     r2 = bounding_radius(body) ** 2
-    cx, cy, cz = centre[0], centre[1], centre[2]
+    c = (centre[0], centre[1], centre[2])
     nodes = x.shape[1]
     for b0 in range(0, nodes, SCAN_BLOCK):
         b1 = min(nodes, b0 + SCAN_BLOCK)
@@ -224,11 +224,8 @@ def nodes_inside(x, inv_mass, flag, body, b_state):
         near = 0
         for n in range(b0, b1):
             u = uint64(n)
-            dx = x[0, u] - cx
-            dy = x[1, u] - cy
-            dz = x[2, u] - cz
             near += 1 if ((flag[u] == 0) & (inv_mass[u] > 0.0)
-                          & (dx * dx + dy * dy + dz * dz <= r2)) else 0
+                          & (distance_sq(x, u, c) <= r2)) else 0
         if near != 0:
             count += _inside_in(b0, b1, x, inv_mass, flag, body, centre, rot, r2)
     return count

@@ -35,6 +35,16 @@ def cross(a, b):
 
 
 @njit(cache=True, inline="always")
+def distance_sq(x, u, c):
+    """|x[:, u] − c|² for a (3, N) array x, a column u and a point c (a tuple): the
+    components' squares added left to right, as the scans of every node compare them."""
+    dx = x[0, u] - c[0]
+    dy = x[1, u] - c[1]
+    dz = x[2, u] - c[2]
+    return dx * dx + dy * dy + dz * dz
+
+
+@njit(cache=True, inline="always")
 def mat_vec(m, v):
     """m · v for a 3 × 3 array m."""
     return (m[0, 0] * v[0] + m[0, 1] * v[1] + m[0, 2] * v[2],
