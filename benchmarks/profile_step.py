@@ -54,6 +54,31 @@ def write_map(path: str) -> int:
     return len(starts)
 
 
+def step_call(scenario: str, warm_up: float, overrides: dict | None = None) -> tuple:
+    """(model, state, arguments of explicit.central_step) for `scenario` under central
+    differences, run to `warm_up` seconds of simulated time: calling the step kernel with them
+    repeats the step from that state (step_time.py times it too)."""
+    from emfabric.config.scenario import load_scenario
+    from emfabric.integrators import make_integrator
+    from emfabric.integrators.central import ROTATION_TOLERANCE, CentralDifference
+    from emfabric.sim.builder import build_model
+    from emfabric.sim.state import initial_state
+
+    model = build_model(load_scenario(scenario, {"solver.integrator": "central-difference",
+                                                 **(overrides or {})}))
+    integ = make_integrator(model)
+    assert isinstance(integ, CentralDifference)
+    s = initial_state(model)
+    s2 = s.copy()
+    while s.t < warm_up:
+        integ.step(s, s2)
+        s, s2 = s2, s
+    rowbuf, threads = integ.kernel_buffers
+    call = (integ.physics, s.arrays, s2.arrays, integ.work, rowbuf, threads, *integ.switches,
+            s.t, s.dt, ROTATION_TOLERANCE, s2.energy.copy())
+    return model, s, call
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("scenario", nargs="?", default="paper-no-field")
@@ -71,26 +96,10 @@ def main() -> None:
             env = dict(os.environ, NUMBA_CACHE_DIR=cache, EMFABRIC_PROFILE_CACHE="1")
             os.execve(sys.executable, [sys.executable, __file__, *sys.argv[1:]], env)
     from emfabric._kernels.explicit import central_step
-    from emfabric.config.scenario import load_scenario, parse_override
-    from emfabric.integrators import make_integrator
-    from emfabric.integrators.central import ROTATION_TOLERANCE, CentralDifference
-    from emfabric.sim.builder import build_model
-    from emfabric.sim.state import initial_state
+    from emfabric.config.scenario import parse_override
 
     overrides = dict(parse_override(text) for text in args.set)
-    model = build_model(load_scenario(args.scenario, {"solver.integrator": "central-difference",
-                                                      **overrides}))
-    integ = make_integrator(model)
-    assert isinstance(integ, CentralDifference)
-    s = initial_state(model)
-    s2 = s.copy()
-    while s.t < args.warm_up:
-        integ.step(s, s2)
-        s, s2 = s2, s
-    rowbuf, threads = integ.kernel_buffers
-    energy = s2.energy.copy()
-    call = (integ.physics, s.arrays, s2.arrays, integ.work, rowbuf, threads, *integ.switches,
-            s.t, s.dt, ROTATION_TOLERANCE, energy)
+    model, s, call = step_call(args.scenario, args.warm_up, overrides)
     central_step(*call)
     count = write_map(f"/tmp/perf-{os.getpid()}.map")
     print(f"{count} compiled functions named in /tmp/perf-{os.getpid()}.map; now, in another "

@@ -38,14 +38,10 @@ def measure(size: int, warm_up: float) -> dict[str, float]:
 
     sys.path.insert(0, str(HERE))
     import bench
+    import profile_step
 
     from emfabric._kernels.explicit import central_step
     from emfabric._kernels.nodes import drift_rows, kick_rows
-    from emfabric.config.scenario import load_scenario
-    from emfabric.integrators import make_integrator
-    from emfabric.integrators.central import ROTATION_TOLERANCE
-    from emfabric.sim.builder import build_model
-    from emfabric.sim.state import initial_state
 
     numba.set_num_threads(1)
     model, integ, s = bench.deformed_sheet(size)
@@ -70,17 +66,7 @@ def measure(size: int, warm_up: float) -> dict[str, float]:
         out[name] = min(samples)
         out[name + "_median"] = statistics.median(samples)
 
-    pf = build_model(load_scenario("paper-field", {"solver.integrator": "central-difference"}))
-    integ = make_integrator(pf)
-    s = initial_state(pf)
-    s2 = s.copy()
-    while s.t < warm_up:
-        integ.step(s, s2)
-        s, s2 = s2, s
-    rowbuf, threads = integ.kernel_buffers
-    energy = s2.energy.copy()
-    call = (integ.physics, s.arrays, s2.arrays, integ.work, rowbuf, threads, *integ.switches,
-            s.t, s.dt, ROTATION_TOLERANCE, energy)
+    _model, _state, call = profile_step.step_call("paper-field", warm_up)
     central_step(*call)
     samples = []
     for _ in range(7):
