@@ -648,12 +648,8 @@ def _rotate_row(nb, count, inv_mass, charge, uni, sourced, nf, x, tau, v, vat, b
         buf[ROW_PROJECTION, u] = (buf[ROW_ROTATION, u] * buf[ROW_ROTATION, u]
                                   + buf[ROW_ROTATION + 1, u] * buf[ROW_ROTATION + 1, u]
                                   + buf[ROW_ROTATION + 2, u] * buf[ROW_ROTATION + 2, u])
-    # the largest apart, over integer keys (reductions.py: a maximum of doubles is not
-    # vectorised, in this loop or in the one above)
-    kbig = order_key(0.0)
-    for i in range(count):
-        kbig = max(kbig, order_key(buf[ROW_PROJECTION, uint64(i)]))
-    big = from_key(kbig)
+    # the largest apart (_buf_max: a maximum in the loop above would not vectorise)
+    big = _buf_max(buf, ROW_PROJECTION, count)
     if big == 0.0:
         return
     if big < TAN_SERIES_LIMIT:
@@ -705,6 +701,16 @@ def rodrigues(v, q_over_m, b, h):
     return (v[0] * cs + (ky * v[2] - kz * v[1]) * sn + kx * kv,
             v[1] * cs + (kz * v[0] - kx * v[2]) * sn + ky * kv,
             v[2] * cs + (kx * v[1] - ky * v[0]) * sn + kz * kv)
+
+
+@njit(cache=True, inline="always")
+def _buf_max(buf, r, count):
+    """max(0, buf[r, :count]) of non-negative values, over integer keys (reductions.py: a
+    maximum of doubles is not vectorised)."""
+    k = order_key(0.0)
+    for i in range(count):
+        k = max(k, order_key(buf[r, uint64(i)]))
+    return from_key(k)
 
 
 @njit(cache=True, inline="always")
@@ -826,11 +832,8 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
             u = uint64(i)
             ksum = (buf[RKW, u] + buf[RKW, u + uint64(1)]) + (buf[rku, u] + buf[rkd, u])
             buf[ROW_PROJECTION, u] = 2.0 * ksum * inv_mass[uint64(nb + i)]
-        # the largest apart, over integer keys as in _rotate_row (ROW_PROJECTION is scratch)
-        kworst = order_key(0.0)
-        for i in range(nx):
-            kworst = max(kworst, order_key(buf[ROW_PROJECTION, uint64(i)]))
-        sums[SUM_STIFFNESS, j] = from_key(kworst)
+        # the largest apart, as in _rotate_row (ROW_PROJECTION is scratch here)
+        sums[SUM_STIFFNESS, j] = _buf_max(buf, ROW_PROJECTION, nx)
         # the work of the yarn force over the placement of the candidates (central_step); the
         # field's and gravity's are booked from the kicks' velocities, which see no placement
         proj = 0.0
@@ -933,7 +936,7 @@ def _node_stats(nb, count, mass, x, v, xref, frame, buf, sums, j):
         buf[rd + 5, u] = mi * (pz * vx - px * vz)
         buf[rd + 6, u] = mi * (px * vy - py * vx)
     # the extremes over integer keys (reductions.py): the loop vectorises, where twelve maxima
-    # and minima of doubles were one scalar compare after another (~20 % of the kick)
+    # and minima of doubles were one scalar compare after another (~15 % of the kick)
     low = order_key(math.inf)
     high = order_key(-math.inf)
     kdefl = kfast = order_key(0.0)
