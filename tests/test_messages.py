@@ -169,3 +169,20 @@ def test_an_empty_file_runs_the_defaults_with_a_warning(tmp_path, caplog, text, 
     with caplog.at_level(logging.WARNING, logger="emfabric.config.scenario"):
         load_scenario("demo-small")  # a scenario with keys: no warning
     assert not [r for r in caplog.records if r.name == "emfabric.config.scenario"]
+
+
+@pytest.mark.parametrize("source, shown", [
+    ('{kind="loop", centre=[0, 0, -0.1], normal=[0, 0, 0], radius=0.1, current=1000}',
+     "field.sources[0].normal = [0.0, 0.0, 0.0]: allowed: a non-zero vector"),
+    ('{kind="solenoid", centre=[0, 0, -0.1], axis=[0, 0, 0], radius=0.1, length=0.05, '
+     'turns=10, current=1000}',
+     "field.sources[0].axis = [0.0, 0.0, 0.0]: allowed: a non-zero vector"),
+])
+def test_a_zero_source_direction_is_shown_as_written_numbers(source, shown):
+    """The value in the message is the user's numbers, not NumPy's reprs (np.float64(0.0))."""
+    from emfabric.sim.builder import build_model
+
+    with pytest.raises(ScenarioError) as info:
+        build_model(load_scenario("demo-small", dict([parse_override(
+            f"field.sources=[{source}]")])))
+    assert str(info.value) == shown

@@ -59,7 +59,7 @@ def build_field(scenario: Scenario) -> Field:
         size = float(np.linalg.norm(direction))
         if not size > 0.0:
             key = "normal" if src.kind == "loop" else "axis"
-            raise ScenarioError(f"field.sources[{i}].{key} = {list(direction)}: allowed: a "
+            raise ScenarioError(f"field.sources[{i}].{key} = {direction.tolist()}: allowed: a "
                                 f"non-zero vector")
         n = direction / size
         wire = src.wire_radius if src.wire_radius is not None else WIRE_FRACTION * src.radius
