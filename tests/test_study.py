@@ -75,6 +75,32 @@ def test_results_file_names_axes_units_and_vectors(swept):
     assert "emfabric_version" in ds.attrs and "demo-small" in ds.attrs["study"]
 
 
+def test_axis_coordinates_carry_their_keys_units(tmp_path):
+    """CF units on the axes of results.nc: each axis's scenario key's unit (its docstring's),
+    "1" for a key of none, on a vector axis's values and on Latin-hypercube samples too."""
+    from emfabric.config.scenario import key_unit
+    from emfabric.studies.sweep import collect
+
+    assert (key_unit("projectile.mass"), key_unit("field.B"), key_unit("projectile.velocity"),
+            key_unit("contact.static_friction"), key_unit("case"),
+            key_unit("projectile.nosuch")) == ("kg", "T", "m/s", "1", None, None)
+    (tmp_path / "study.toml").write_text(
+        'base = "demo-small"\n[axes]\n"projectile.mass" = [0.037, 0.05]\n'
+        '"field.B" = [[0, 0, 0], [0.05, 0, 0]]\n"contact.static_friction" = [0.95, 1.0]\n')
+    (tmp_path / "out").mkdir()
+    path, _failed = collect(load_study(tmp_path / "study.toml"), tmp_path / "out")
+    ds = xr.open_dataset(path)
+    assert ds["projectile.mass"].attrs["units"] == "kg"
+    assert ds["field.B.values"].attrs["units"] == "T"
+    assert "units" not in ds["field.B"].attrs  # the vector axis's index
+    assert ds["contact.static_friction"].attrs["units"] == "1"
+    (tmp_path / "lhs.toml").write_text(
+        'base = "demo-small"\n[lhs]\nsamples = 2\nseed = 1\n'
+        '[lhs.ranges]\n"projectile.radius" = [0.01, 0.02]\n')
+    path, _failed = collect(load_study(tmp_path / "lhs.toml"), tmp_path / "out")
+    assert xr.open_dataset(path)["projectile.radius"].attrs["units"] == "m"
+
+
 def test_rerun_runs_nothing_and_a_deleted_case_alone_reruns(swept):
     root, plan, _outcome = swept
     again = sweep(plan, root / "out", workers=1)
@@ -100,9 +126,18 @@ def test_a_diverging_case_is_recorded_and_the_others_complete(tmp_path):
         (2, 2, 0, 1)
     # demo-small's charge is beyond what any material holds: said once, not once per case
     assert res.stderr.count("beyond what any material holds") == 1, res.stderr
+    assert "warning: the study's first case: surface field" in res.stderr
+    # nothing from the workers: no bare log lines, no NumPy RuntimeWarning of the diverging
+    # case; each case keeps its own warnings in its record
+    assert "RuntimeWarning" not in res.stderr and "encountered" not in res.stderr
     ds = xr.open_dataset(out / "results.nc")
     assert ds["status"].values.tolist() == ["complete", "diverged"]
     assert "energy balance" in str(ds["message"].values[1])
+    assert str(ds["message"].values[1]).startswith("diverged at t = ")  # no class name
+    records = [json.loads(p.read_text()) for p in (out / "cases").glob("*.json")]
+    assert len(records) == 2
+    for rec in records:
+        assert any("beyond what any material holds" in w for w in rec["warnings"])
 
 
 def test_unreachable_scheduler_fails_at_once(tmp_path):
@@ -148,6 +183,34 @@ def test_study_file_errors_say_what(tmp_path):
         load_study(bad)
     with pytest.raises(StudyError, match="does not exist"):
         load_study(tmp_path / "nope.toml")
+    # the file's own keys, in its terms: the key, the value, what is allowed (never pydantic's
+    # "Extra inputs are not permitted", "Field required", "Value error")
+    for text, line in [
+        ('base = "demo-small"\nkeep_historys = true\n',
+         "keep_historys: unknown key (did you mean 'keep_histories'?); allowed: base, set, "
+         "axes, lhs, keep_histories"),
+        ('bas = "demo-small"\n',
+         "base: missing; needs a built-in scenario name or a scenario file, in quotes"),
+        ('base = "demo-small"\n[lhs]\nsamples = 0\nranges = {"projectile.mass" = [1, 2]}\n',
+         "lhs.samples = 0: allowed: an integer from 1 to 100000"),
+        ('base = "demo-small"\n[lhs]\nsamples = 2\nranges = {"projectile.mass" = [1]}\n',
+         "lhs.ranges.'projectile.mass' = [1]: allowed: two numbers [low, high]"),
+        ('base = "demo-small"\n[axes]\n"projectile.mass" = 0.05\n',
+         "axes.'projectile.mass' = 0.05: allowed: a list of values"),
+        ('base = "demo-small"\n[axes]\n"projectile.mass" = []\n',
+         "axes.'projectile.mass' is empty; allowed: a list of values"),
+    ]:
+        bad.write_text(text)
+        with pytest.raises(StudyError) as info:
+            load_study(bad)
+        assert f"\n  {line}" in str(info.value)
+        for word in ("Extra inputs", "Field required", "Value error", "Input should"):
+            assert word not in str(info.value)
+    # a base that does not load says so without a [set] the file does not have
+    bad.write_text('base = "nosuch"\n')
+    with pytest.raises(StudyError) as info:
+        load_study(bad)
+    assert str(info.value).startswith("base = 'nosuch': no built-in scenario")
 
 
 
@@ -200,6 +263,11 @@ def test_estimate_is_eq_5_4_with_the_node_charge():
     assert estimate(sc, 0.1, 2e-4).B == pytest.approx(est.B / 4, rel=1e-12)
     doubled = estimate(sc.replace(**{"fabric.charge_per_node": 1.0}), 0.1, 1e-4)
     assert doubled.B == pytest.approx(est.B / 2, rel=1e-12)
+    # the tilt is the angle of the axis from its initial direction: (0, π]
+    assert estimate(sc, np.pi, 1e-4).B == pytest.approx(np.pi / 0.1 * est.B, rel=1e-12)
+    for bad in (0.0, -0.1, 4.0, float("nan")):
+        with pytest.raises(ValueError, match=r"allowed: an angle in \(0, π\] rad"):
+            estimate(sc, bad, 1e-4)
     cli = subprocess.run([sys.executable, "-m", "emfabric", "estimate", "paper-field",
                           "--set", "fabric.nodes=[41,41]", "--set", "fabric.rescale=false",
                           "--set", "fabric.charge_per_node=0.5", "--target-tilt", "0.1",

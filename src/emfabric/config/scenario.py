@@ -1578,6 +1578,20 @@ def _key_paths(model: type[BaseModel] | None = None, prefix: str = "") -> list[s
     return out
 
 
+def key_unit(path: str) -> str | None:
+    """The unit of the scenario key at the dotted `path` for a CF `units` attribute: the one
+    its docstring gives in [brackets], "1" for a key of no unit; None where `path` is not a
+    key of the scenario (a study's own dimension such as `case`)."""
+    parts = tuple(path.split("."))
+    try:
+        where = _locate(parts)
+    except (KeyError, TypeError, ValueError, IndexError):
+        return None
+    if where.key is None or where.key_len != len(parts):
+        return None
+    return where.key.unit or "1"
+
+
 def _allowed_forms(error: dict) -> list[str]:
     """The forms one member of a union allows, from its error on the union's value."""
     kind = error["type"]

@@ -104,7 +104,8 @@ class Snapshots:
         self._writing = [f for f in self._writing if not f.done()]
         for f in done:
             f.result()
-        self._writing.append(self._writer.submit(self._write_vtk, len(self.times) - 1, snap))
+        self._writing.append(self._writer.submit(self._write_vtk_quiet, len(self.times) - 1,
+                                                 snap))
 
     def wait(self) -> None:
         """Return once every .vtu file taken so far is written; raise the first write's error
@@ -225,6 +226,12 @@ class Snapshots:
         self._write_pvd("fabric")
         if self.model.has_body:
             self._write_pvd("projectile")
+
+    def _write_vtk_quiet(self, k: int, snap: tuple) -> None:
+        # the writer thread's NumPy warnings as quiet as the run's (runner.loop._loop: errstate
+        # is per thread)
+        with np.errstate(all="ignore"):
+            self._write_vtk(k, snap)
 
     def _write_vtk(self, k: int, snap: tuple) -> None:
         m = self.model

@@ -12,6 +12,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import xarray as xr
 
 from emfabric._kernels import cache_dir, cache_persistent, is_compiled, mark_compiled
@@ -156,6 +157,18 @@ def _resume(out: Path, scenario: Scenario | None, progress: ProgressFn | None,
 def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
           progress: ProgressFn | None, end_time: float | None,
           threads: int | None = None) -> RunResult:
+    # NumPy's floating-point warnings stay out of the run's output: a state that overflows or
+    # divides by zero is the run's own to detect and report (the step's non-finite check, the
+    # history's, the guards: a diverged run names the time, Δt and where), and NumPy would
+    # only add its "RuntimeWarning: overflow encountered" lines (from the summary, a snapshot)
+    # to that message (errstate is per thread, so a study's other cases are not touched)
+    with np.errstate(all="ignore"):
+        return _run_loop(model, s_in, resumed, out, progress, end_time, threads)
+
+
+def _run_loop(model: Model, s_in: State | None, resumed, out: Path | None,
+              progress: ProgressFn | None, end_time: float | None,
+              threads: int | None = None) -> RunResult:
     wall0 = time.perf_counter()
     options = model.options
     integ = make_integrator(model, threads=threads)

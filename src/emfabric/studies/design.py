@@ -53,8 +53,9 @@ def estimate(scenario: Scenario, tilt: float, by: float) -> Estimate:
     """Eq 5.4 for the scenario's projectile and fabric (see the module docstring)."""
     from emfabric.sim.builder import build_model
 
-    if not (tilt > 0.0 and math.isfinite(tilt)):
-        raise ValueError(f"--target-tilt {tilt}: allowed: a positive angle [rad]")
+    if not 0.0 < tilt <= math.pi:
+        # the tilt is the angle between the axis and its initial direction: at most π
+        raise ValueError(f"--target-tilt {tilt}: allowed: an angle in (0, π] rad")
     if not (by > 0.0 and math.isfinite(by)):
         raise ValueError(f"--by {by}: allowed: a positive time [s]")
     model = build_model(scenario, writes=False)  # an estimate: nothing written

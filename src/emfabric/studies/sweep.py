@@ -34,6 +34,7 @@ Ctrl-C (the study stops them: no worker tracebacks).
 from __future__ import annotations
 
 import contextlib
+import difflib
 import hashlib
 import itertools
 import json
@@ -171,6 +172,46 @@ def _dotted(data: dict[str, Any], path: Path) -> dict[str, Any]:
     return data
 
 
+_STUDY_FORMS = {
+    "base": "a built-in scenario name or a scenario file, in quotes",
+    "set": "a table of dotted scenario keys and their values",
+    "axes": "a table of dotted scenario keys and their lists of values",
+    "lhs": "a table with samples, seed and ranges",
+    "keep_histories": "true or false",
+    "samples": "an integer from 1 to 100000",
+    "seed": "an integer",
+    "ranges": "a table of dotted scenario keys and their [low, high]",
+}
+"""What each key of a study file takes, in its messages."""
+
+
+def _study_problem(e: dict) -> str:
+    """One line for a study file's validation error, in the file's terms (the key, the value,
+    what is allowed) rather than pydantic's."""
+    loc = [str(p) for p in e["loc"]]
+    kind = e["type"]
+    if loc[:2] == ["lhs", "ranges"] and len(loc) > 2:
+        # a range's own problem (not two numbers, or not numbers): the whole range
+        return (f"lhs.ranges.{loc[2]!r} = {e.get('input')!r}: allowed: two numbers "
+                f"[low, high]")
+    if loc[:1] == ["axes"] and len(loc) > 1:
+        return f"axes.{loc[1]!r} = {e.get('input')!r}: allowed: a list of values"
+    where = ".".join(loc)
+    if kind == "extra_forbidden":
+        allowed = ["samples", "seed", "ranges"] if loc[:-1] == ["lhs"] else list(
+            Study.model_fields)
+        close = difflib.get_close_matches(loc[-1], allowed, n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        return f"{where}: unknown key{hint}; allowed: {', '.join(allowed)}"
+    if kind == "missing":
+        return f"{where}: missing; needs {_STUDY_FORMS[loc[-1]]}"
+    if kind in ("value_error", "assertion_error"):
+        msg = str(e.get("ctx", {}).get("error", e["msg"]))
+        return f"{where}: {msg}" if loc else msg
+    needs = _STUDY_FORMS.get(loc[-1] if loc else "", e["msg"])
+    return f"{where or 'the study file'} = {e.get('input')!r}: allowed: {needs}"
+
+
 def load_study(path: str | Path) -> Plan:
     """Read and check a study file; every case's scenario is validated here, before any run
     (errors name the case's overrides and the key)."""
@@ -184,8 +225,7 @@ def load_study(path: str | Path) -> Plan:
     try:
         study = Study.model_validate(_dotted(data, path))
     except ValidationError as err:
-        lines = [f"  {'.'.join(str(p) for p in e['loc']) or '(top)'}: {e['msg']}"
-                 for e in err.errors()]
+        lines = [f"  {_study_problem(e)}" for e in err.errors()]
         raise StudyError(f"study file {str(path)!r}:\n" + "\n".join(lines)) from None
     base_path = Path(study.base)
     if base_path.suffix == ".toml" and not base_path.is_absolute():
@@ -198,7 +238,8 @@ def plan_study(study: Study, base: str) -> Plan:
     try:
         scenario = load_scenario(base, dict(study.set))
     except ScenarioError as err:
-        raise StudyError(f"base = {study.base!r} with [set]: {err}") from None
+        raise StudyError(f"base = {study.base!r}{' with [set]' if study.set else ''}: {err}"
+                         ) from None
     if study.lhs is not None:
         dims = ["case"]
         rng = np.random.default_rng(study.lhs.seed)
@@ -251,30 +292,52 @@ def run_case(text: str, out: str | None, threads: int, explicit: bool = False
 
         # a case Dask runs again after its worker on another host was lost: its lock is void
         drop_foreign(out)
-    # the case's plausibility warnings (is the charge physical?) would print once per case
-    # from every worker: the command that started the study prints them once
-    # (cli.study._warn_actuation); the run's other messages pass. For good in this worker
-    # process (a filter per case would race between a worker's threads).
-    loop_log = logging.getLogger("emfabric.runner.loop")
-    if not any(isinstance(f, _WithoutPlausibility) for f in loop_log.filters):
-        loop_log.addFilter(_WithoutPlausibility())
-    try:
-        result = run(sc, out, threads=threads if explicit else None)
-    except (DivergenceError, OSError, RuntimeError, ValueError, ArithmeticError) as exc:
-        result = getattr(exc, "result", None)
-        message = f"{type(exc).__name__}: {exc}"
-        if result is None:
-            return _failed(message, time.perf_counter() - t0)
+    # the case's warnings (is the charge physical? a value far outside ballistic practice)
+    # would print from every worker, once per case and without the command's "warning:": the
+    # command that started the study prints the first case's once (cli.study._warn_actuation)
+    # and each case keeps its own in its record (cases/<key>.json, "warnings")
+    with _CaseLog.capture() as warned:
+        try:
+            result = run(sc, out, threads=threads if explicit else None)
+        except (DivergenceError, OSError, RuntimeError, ValueError, ArithmeticError) as exc:
+            result = getattr(exc, "result", None)
+            # a divergence's message says what it is; anything else is named by its class
+            message = str(exc) if isinstance(exc, DivergenceError) else \
+                f"{type(exc).__name__}: {exc}"
+            if result is None:
+                return {**_failed(message, time.perf_counter() - t0), "warnings": warned}
     metrics = metrics_of(result)
     metrics["message"] = message or result.end_reason
+    metrics["warnings"] = warned
     return metrics
 
 
-class _WithoutPlausibility(logging.Filter):
-    """Drops the log records of emfabric.sim.plausibility.log_warnings."""
+class _CaseLog(logging.Handler):
+    """emfabric's log records in a process that runs study cases (a Dask worker): kept with
+    the case that the thread emitting them runs (`capture`), else dropped; never printed
+    (without a handler of its own, Python's last-resort handler would print each warning bare
+    on the worker's stderr, which a local cluster's workers share with the terminal)."""
 
-    def filter(self, record: logging.LogRecord) -> bool:
-        return not record.pathname.endswith("plausibility.py")
+    _local = threading.local()
+
+    def emit(self, record: logging.LogRecord) -> None:
+        lines = getattr(self._local, "lines", None)
+        if lines is not None and record.levelno >= logging.WARNING:
+            lines.append(record.getMessage())
+
+    @classmethod
+    @contextlib.contextmanager
+    def capture(cls):
+        """The warnings logged by this thread inside the block, as a list (filled as they
+        come); installs the handler on the "emfabric" logger once per process."""
+        logger = logging.getLogger("emfabric")
+        if not any(isinstance(h, cls) for h in logger.handlers):
+            logger.addHandler(cls())
+        cls._local.lines = lines = []
+        try:
+            yield lines
+        finally:
+            cls._local.lines = None
 
 
 def _failed(message: str, wall: float) -> dict[str, Any]:
@@ -550,6 +613,7 @@ def collect(plan: Plan, out: Path) -> tuple[Path, int]:
     import xarray as xr
 
     from emfabric import __version__
+    from emfabric.config.scenario import key_unit
     from emfabric.io.netcdf import write_netcdf, xyz_coordinate
 
     shape = tuple(len(plan.coords[d]) for d in plan.dims)
@@ -586,19 +650,23 @@ def collect(plan: Plan, out: Path) -> tuple[Path, int]:
     for d in dims:
         values = plan.coords[d]
         arr = np.asarray(values) if d != "case" else np.arange(len(values))
+        # the scenario key's unit on a numeric axis (its docstring's; "1": none)
+        unit = {"units": u} if (u := key_unit(d)) is not None else {}
         if arr.ndim == 1 and arr.dtype.kind in "ifub":
-            coords[d] = (d, arr)
+            coords[d] = (d, arr, unit if arr.dtype.kind in "if" else {})
         elif arr.ndim == 1:
             coords[d] = (d, arr.astype(str))
         else:  # a vector-valued axis: an index dimension and the vectors as a variable
             coords[d] = (d, np.arange(len(values)))
             comp = f"{d}.component"
             variables[f"{d}.values"] = ((d, comp), arr.astype(float),
-                                        {"long_name": f"the values of the axis {d}"})
+                                        {"long_name": f"the values of the axis {d}", **unit})
     if plan.study.lhs is not None:
         for key in plan.study.lhs.ranges:
+            unit = {"units": u} if (u := key_unit(key)) is not None else {}
             variables[key] = (("case",), np.array([c.overrides[key] for c in plan.cases]),
-                              {"long_name": f"sampled value of {key} (Latin hypercube)"})
+                              {"long_name": f"sampled value of {key} (Latin hypercube)",
+                               **unit})
     name, labels, attrs = xyz_coordinate()
     coords[name] = (name, labels, attrs)
     ds = xr.Dataset(variables, coords=coords)
