@@ -37,6 +37,9 @@ from conftest import make
      "failure strain is 3.5 (350 %)"),
     ({"fabric.material.name": "kevlar-km2", "fabric.material.tensile_strength": 3.88},
      "did you type GPa as Pa?"),
+    # a charge the sphere (radius 0.02635 m) carries, half a metre from its centre
+    ({"projectile.charges": [{"position": [0.5, 0.0, 0.0], "charge": 1e-6}]},
+     "lies 0.5 m from the centre of mass, outside the projectile (it reaches 0.02635 m)"),
 ])
 def test_typing_mistakes_are_warned_with_the_fix(overrides, expected, caplog):
     """Each mistake of the issue's new user runs (a warning, not an error) and says why and
@@ -53,6 +56,15 @@ def test_a_heavy_driver_is_legitimate():
     model = build_model(make(**{"fabric.nodes": [21, 21], "projectile.mass": 1000.0}))
     (warning,) = pre_run_warnings(model)
     assert "constant speed" in warning or "g as kg" in warning
+
+
+def test_a_charge_on_the_surface_is_no_mistake():
+    """The paper's charges sit on the projectile's surface (section 6): no warning there."""
+    r = 0.02635
+    model = build_model(make(**{"fabric.nodes": [21, 21], "projectile.charges": [
+        {"position": [r, 0.0, 0.0], "charge": 1e-6},
+        {"position": [0.0, r / 2 ** 0.5, -r / 2 ** 0.5], "charge": -1e-6}]}))
+    assert pre_run_warnings(model) == []
 
 
 def test_the_builtin_scenarios_raise_no_warning():

@@ -187,6 +187,17 @@ def pre_run_warnings(model) -> list[str]:
                    f"({side:.4g} m): it strikes the frame, not the fabric"
                    + (f"; check projectile.radius = {radius:g} m (mm as m?)" if radius > 0.1
                       else ""))
+    if pr is not None:
+        # a point charge the projectile carries sits on or inside it (the paper's four sit on
+        # its surface, section 6); one beyond its reach is a unit or frame mistake
+        for k, ch in enumerate(pr.charges):
+            dist = float(np.linalg.norm(np.asarray(ch.position, dtype=float)))
+            if dist > float(geo.bound) * (1.0 + 1e-9):
+                out.append(f"projectile.charges[{k}].position = {list(ch.position)} m lies "
+                           f"{dist:.4g} m from the centre of mass, outside the projectile "
+                           f"(it reaches {float(geo.bound):.4g} m): a charge the projectile "
+                           f"carries sits on or inside it (positions are relative to the "
+                           f"centre, in m)")
     v = np.asarray(model.body_v0, dtype=float)
     speed = float(np.linalg.norm(v))
     if pr is not None and speed > 0.0 and not BALLISTIC_SPEED[0] <= speed <= BALLISTIC_SPEED[1]:
