@@ -96,7 +96,10 @@ def test_separating_node_is_not_held():
 
 
 def test_spinning_surface_velocity():
-    """Stick uses v_cm + ω × r (eq. 4.9): a spinning body drags the node sideways."""
+    """The contact law takes the surface point's velocity v_cm + ω × r (eq. 4.9): a spinning
+    body whose surface slips past the node faster than friction holds drags it sideways by
+    μ_d times the normal velocity demand (a sliding contact; sticking to v_cm + ω × r is
+    test_sticking_node_lands_where_its_phi_update_puts_it)."""
     omega = np.array([0.0, 0.0, 1000.0])
     # node on the −x side of a body moving −x at 10 m/s; the surface there moves −20 m/s along y
     nc, x, v, j, f, m = _contact([-0.019, 0, 0], [0, 0, 0], omega=omega, vel=(-10.0, 0, 0))

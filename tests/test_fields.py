@@ -248,7 +248,6 @@ def test_fabric_keeps_its_energy_in_a_static_loop_field():
     assert float(ds.strain_energy.max()) > 0.05 * float(ds.kinetic_energy_fabric[0])
     assert e1 < 1e-3
     assert e1 / e2 > 3.0
-    assert float(np.abs(ds.work_field).max()) == 0.0
 
 
 def test_cli_field_prints_json():

@@ -78,15 +78,20 @@ def test_momentum_conserved_free_edges():
     assert min(rates) >= 1.8, (sustained, rates)
     mean_rate = (total[0] / total[-1]) ** (1 / (len(dts) - 1))
     assert mean_rate >= 1.8, (total, mean_rate)
+    # and small, not only shrinking: a drift that halves with Δt could still be a gross error
+    # in the momentum exchange (1.2e-7 of |L| measured at 2e-7 s, 1.1e-8 at 2.5e-8 s)
+    assert max(total) < 1e-6, total
 
 
+@pytest.mark.parametrize("integrator", ["central-difference", "phi"])
 @pytest.mark.parametrize("n,end", [(31, 30e-6), (100, 12e-6)])
-def test_symmetric_impact_no_spin(n, end):
+def test_symmetric_impact_no_spin(n, end, integrator):
     """Case 4: no field, no modulus scatter, central hit: ω stays exactly zero and the sphere
     stays on the axis (mirror-exact force assembly and exactly rounded reaction sums); the
-    100×100 case is the paper's full grid."""
+    100×100 case is the paper's full grid. Both schemes: the paper's φ-scheme (its claim of
+    machine precision) and the default central differences."""
     sc = _patch(n, **{"field.B": [0, 0, 0], "fabric.material.modulus_cv": 0.0,
-                      "solver.end_time": end})
+                      "solver.end_time": end, "solver.integrator": integrator})
     ds = run(sc).history
     assert int(ds.contact_nodes.max()) >= 5
     assert float(np.abs(ds.angular_velocity).max()) == 0.0
@@ -117,20 +122,22 @@ def test_sense_of_field_induced_spin():
 
 
 def test_energy_budget_closes_with_the_scheme():
-    """Every energy term is computed on its own; the balance error is a small discretisation
-    error (under 1 % of the energy exchanged) that shrinks as Δt does."""
-    def err(dt):
-        ds = run(_patch(31, **{"solver.end_time": 30e-6, "solver.dt_max": dt})).history
+    """Every energy term is computed on its own; the balance error is the scheme's own
+    discretisation error: small (under 1e-3 of the energy exchanged at the default step; 8e-5
+    measured) and second order (a quarter at half the step: 4.2× measured), the dissipations
+    never negative along the run."""
+    def err(courant):
+        ds = run(_patch(31, **{"solver.end_time": 30e-6, "solver.courant": courant})).history
         exchanged = float(ds.kinetic_energy_projectile[0] - ds.kinetic_energy_projectile[-1])
         for term in ("dissipation_friction", "dissipation_contact", "dissipation_damage"):
-            assert float(ds[term][-1]) >= 0.0, term
+            assert float(ds[term].min()) >= 0.0, term
         assert exchanged > 5.0
         return abs(float(ds.energy_balance_error[-1])) / exchanged
 
-    coarse = err(1e-6)
-    fine = err(2.5e-8)
-    assert coarse < 0.01
-    assert fine < coarse
+    coarse = err(0.25)  # the default step
+    fine = err(0.125)
+    assert coarse < 1e-3
+    assert coarse / fine > 3.0, (coarse, fine)
 
 
 def test_contact_force_is_the_momentum_the_fabric_gives():
