@@ -555,17 +555,12 @@ def fused_iterate(phys, prev, sin, sout, work, t1, phi, dt, rowbuf):
 
     work: the step's Work record (node fields, damage thresholds, flag — nodes left out of the
     error measure —, the error terms and their per-row sums row_sums). rowbuf: (ROWBUF_ROWS,
-    nx + 1). Walks the same row blocks as the threaded kernel, one after the other: the same
-    arithmetic, and one compiled specialisation of _row_block for both. Inlined into the step
-    kernel (step.fabric_iterate), as kick_rows is (its docstring says why).
+    nx + 1). Every row in one block (kick_rows says why): the same arithmetic as the threaded
+    kernel's blocks, and one compiled specialisation of _row_block for both. Inlined into the
+    step kernel (step.fabric_iterate), as kick_rows is (its docstring says why).
     """
     rec = RowRecords(phys.nodes, phys.yarns, phys.material, phys.field)
-    ny = phys.nodes.ny
-    blocks = (ny + ROWS_PER_BLOCK - 1) // ROWS_PER_BLOCK
-    for b in range(blocks):
-        j0 = b * ROWS_PER_BLOCK
-        j1 = min(ny, j0 + ROWS_PER_BLOCK)
-        _row_block(j0, j1, rec, prev, sin, sout, work, t1, phi, dt, rowbuf)
+    _row_block(int64(0), phys.nodes.ny, rec, prev, sin, sout, work, t1, phi, dt, rowbuf)
     _row_sums(work.err_num, work.err_den, phys.nodes.rows, work.row_sums)
 
 
@@ -986,30 +981,31 @@ def drift_rows(phys, sin, sout, work, t0, dt, rowbuf):
 
     Inlined where compiled code calls it (explicit.central_step), as kick_rows is: a
     dispatcher of its own would be one more library whose final module re-optimises and emits
-    the whole of _drift_block again (2.1 s of a cold start)."""
+    the whole of _drift_block again (2.1 s of a cold start). Every row in one block, as
+    kick_rows."""
     rec = RowRecords(phys.nodes, phys.yarns, phys.material, phys.field)
-    ny = phys.nodes.ny
-    for b in range((ny + ROWS_PER_BLOCK - 1) // ROWS_PER_BLOCK):
-        j0 = b * ROWS_PER_BLOCK
-        _drift_block(j0, min(ny, j0 + ROWS_PER_BLOCK), rec, sin, sout, work, t0, dt, rowbuf)
+    _drift_block(int64(0), phys.nodes.ny, rec, sin, sout, work, t0, dt, rowbuf)
 
 
 @njit(cache=True, inline="always")
 def kick_rows(phys, sin, sout, work, t1, dt, rowbuf):
     """The force evaluation and second half of a central-difference step for every row
-    (_kick_block), serially, in the same row blocks as kick_rows_threads; rowbuf (ROWBUF_ROWS,
-    nx + 1). Row sums in work.row_sums.
+    (_kick_block), serially, every row in one block; rowbuf (ROWBUF_ROWS, nx + 1). Row sums in
+    work.row_sums. The same numbers as kick_rows_threads' blocks of ROWS_PER_BLOCK rows (a
+    block's first row recomputes the fill tensions of the row below as that row computes
+    them), and one call rather than one a block: each call references and releases every
+    array of the records it is given (~100, an atomic operation each) and recomputes a row of
+    fill tensions: in blocks of 16 rows the serial step on paper-field's 100 × 100 sheet took
+    2–3 % longer (`python benchmarks/step_time.py --against ...`).
 
     Inlined where compiled code calls it (explicit.central_step): compiled on its own, its
     library's final module re-optimises and emits the whole of _kick_block once more (3.3 s of
     a cold start's critical path), so the run never calls it from Python either
-    (sim.state.update_forces calls _kick_block row block by row block). Called from Python
+    (sim.state.update_forces calls _kick_block itself, one block). Called from Python
     (the benchmarks), it compiles as any kernel."""
     rec = RowRecords(phys.nodes, phys.yarns, phys.material, phys.field)
-    ny = phys.nodes.ny
-    for b in range((ny + ROWS_PER_BLOCK - 1) // ROWS_PER_BLOCK):
-        j0 = b * ROWS_PER_BLOCK
-        _kick_block(j0, min(ny, j0 + ROWS_PER_BLOCK), rec, sin, sout, work, t1, dt, rowbuf)
+    # int64(0): a literal 0 would type (and compile) _kick_block a second time
+    _kick_block(int64(0), phys.nodes.ny, rec, sin, sout, work, t1, dt, rowbuf)
 
 
 @njit  # never cached on its own, as fused_iterate_threads

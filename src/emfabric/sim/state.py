@@ -12,7 +12,7 @@ import numpy as np
 from emfabric._kernels.body import field_wrench
 from emfabric._kernels.diagnostics import total_energy
 from emfabric._kernels.fields import fill_node_fields
-from emfabric._kernels.nodes import ROWBUF_ROWS, ROWS_PER_BLOCK, _kick_block
+from emfabric._kernels.nodes import ROWBUF_ROWS, _kick_block
 from emfabric._kernels.records import (
     BODY_F,
     BODY_M,
@@ -177,17 +177,14 @@ def update_forces(model: Model, state: State) -> None:
     out = StateArrays(scratch.node_x, scratch.node_v, state.node_f, scratch.seg_alpha,
                       scratch.body, state.node_e, scratch.node_contact, state.node_fv,
                       scratch.seg_strain)
-    # kick_rows's row blocks, called from here: kick_rows itself is inlined into the step
+    # kick_rows's one row block, called from here: kick_rows itself is inlined into the step
     # kernel and never compiled on its own in a run (its docstring says why); the arguments
     # have the types kick_rows gives _kick_block, so this compiles nothing the step kernel
     # does not use (tests/test_kernel_cache.py)
     phys = m.physics
     rec = row_records(phys)
     rowbuf = np.empty((ROWBUF_ROWS, m.nx + 1))
-    ny = int(phys.nodes.ny)
-    for j0 in range(0, ny, ROWS_PER_BLOCK):
-        _kick_block(j0, min(ny, j0 + ROWS_PER_BLOCK), rec, start, out, work, state.t, 0.0,
-                    rowbuf)
+    _kick_block(0, int(phys.nodes.ny), rec, start, out, work, state.t, 0.0, rowbuf)
     if m.has_body:
         b = state.body
         field_wrench(m.body, m.field, state.t, b, b[BODY_F], b[BODY_M])
