@@ -5,6 +5,8 @@ import json
 import subprocess
 import sys
 
+import pytest
+
 from emfabric import __version__
 
 EXE = [sys.executable, "-m", "emfabric"]
@@ -36,6 +38,37 @@ def test_json_summary_alone_on_stdout(tmp_path):
     assert r.returncode == 0, r.stderr
     summary = _strict(r.stdout)
     assert summary["status"] == "complete" and summary["steps"] > 0
+
+
+def test_json_summary_says_what_the_history_says(tmp_path):
+    """MODEL §7's summary (final velocity, max tilt, final ω, energy absorbed, broken yarns,
+    steps, wall time) through the command line, with --threads: each figure is the history's
+    (the energy absorbed the sphere's kinetic energy lost, I = 2/5 M R²)."""
+    import math
+
+    import numpy as np
+    import xarray as xr
+
+    out = tmp_path / "d"
+    r = _run("run", "demo-small", "--out", str(out), "--json", "-q", "--threads", "1",
+             "--set", "fabric.nodes=[13,13]", "--set", "solver.end_time=2e-5")
+    assert r.returncode == 0, r.stderr
+    s = _strict(r.stdout)
+    h = xr.open_dataset(out / "history.nc")
+    u, w = h.projectile_velocity.values, h.angular_velocity.values
+    assert s["final_velocity_m_s"] == u[-1].tolist()
+    assert s["residual_speed_m_s"] == math.hypot(*u[-1])
+    assert s["final_omega_rad_s"] == w[-1].tolist()
+    assert s["max_tilt_rad"] == float(h.tilt.max())
+    assert s["max_tilt_deg"] == math.degrees(float(h.tilt.max()))
+    assert s["broken_yarns"] == int(h.broken_yarns[-1])
+    assert s["steps"] == h.sizes["time"] - 1 and s["steps"] > 10
+    assert s["wall_time_s"] > 0.0
+    m, radius = 0.037, 0.02635  # demo-small's sphere (the defaults)
+    lost = 0.5 * m * (u[0] @ u[0] - u[-1] @ u[-1]) + 0.2 * m * radius**2 * (
+        w[0] @ w[0] - w[-1] @ w[-1])
+    assert s["energy_absorbed_J"] == pytest.approx(lost, rel=1e-9) and lost > 1.0
+    assert np.isclose(s["time_s"], float(h.time[-1]), rtol=0, atol=0)
 
 
 def _strict(text):

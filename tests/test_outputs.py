@@ -38,6 +38,15 @@ def test_history_contract(small_run):
     for name in required + list(VARIABLES):
         assert name in ds, name
         assert "units" in ds[name].attrs
+    # MODEL §7's variables in their SI units, written as CF/UDUNITS spells them
+    si = {"dt": "s", "iterations": "1", "projectile_position": "m",
+          "projectile_velocity": "m s-1", "angular_velocity": "rad s-1", "tilt": "rad",
+          "contact_nodes": "1", "max_deflection": "m", "max_stretch": "1",
+          "fabric_momentum": "kg m s-1", "kinetic_energy_projectile": "J",
+          "kinetic_energy_fabric": "J", "strain_energy": "J", "broken_yarns": "1",
+          "min_damage": "1", "yaw": "rad", "contact_force": "N",
+          "fabric_angular_momentum": "kg m2 s-1", "energy_balance_error": "J"}
+    assert {name: ds[name].attrs["units"] for name in si} == si
     assert ds.projectile_position.dims == ("time", "xyz")
     assert ds.time.attrs["units"] == "s"
     assert ds.attrs["emfabric_version"] == __version__
@@ -45,6 +54,11 @@ def test_history_contract(small_run):
     scenario = tomllib.loads(ds.attrs["scenario"])
     assert scenario["fabric"]["nodes"] == [13, 13]
     assert scenario["solver"]["tolerance"] == 1e-6  # defaults written out too
+    # the full scenario: read back, it is the run's, every key
+    from emfabric.config.scenario import scenario_from_dict
+
+    assert scenario_from_dict(scenario, "history.nc").to_dict() == \
+        res.model.scenario.to_dict()
     assert int(ds.contact_nodes.max()) > 0
     assert float(ds.time[-1]) == pytest.approx(6e-6)
 
@@ -57,6 +71,18 @@ def test_snapshots_and_paraview(small_run):
     assert snap.node_position.shape == (4, 169, 3)
     assert snap.yarn_damage.shape == (4, res.model.seg_count)
     np.testing.assert_array_equal(snap.node_position[-1].values, res.state.node_x.T)
+    # the velocities (MODEL §7): the run's last state, and Σ m v of every snapshot is the
+    # fabric momentum history.nc records at the same time
+    assert (snap.node_position.attrs["units"], snap.node_velocity.attrs["units"],
+            snap.yarn_damage.attrs["units"]) == ("m", "m s-1", "1")
+    np.testing.assert_array_equal(snap.node_velocity[-1].values, res.state.node_v.T)
+    hist = xr.open_dataset(out / "history.nc")
+    mass = res.model.nodes.mass
+    for k, t in enumerate(snap.time.values):
+        p = hist.fabric_momentum.sel(time=t).values
+        np.testing.assert_allclose(mass @ snap.node_velocity[k].values, p, rtol=1e-12,
+                                   atol=1e-12 * max(np.abs(p).max(), 1e-30))
+    assert np.abs(snap.node_velocity[-1].values).max() > 1.0  # the struck sheet moves
     # the run's end in its header too, as in history.nc's (it was created "partial")
     assert (snap.attrs["status"], snap.attrs["end_reason"]) == (res.status, res.end_reason)
     pvd = (out / "fabric.pvd").read_text()

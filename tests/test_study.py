@@ -54,7 +54,17 @@ def test_sweep_equals_the_cases_run_one_by_one(swept):
                               hist["angular_velocity"][-1].values)
         assert float(at["max_tilt"]) == float(hist["tilt"].max())
         assert float(at["max_deflection"]) == float(hist["max_deflection"].max())
+        assert float(at["max_yaw"]) == float(hist["yaw"].max())
         assert int(at["broken_yarns"]) == int(hist["broken_yarns"][-1])
+        # the energy absorbed: the sphere's kinetic energy lost, translation and rotation
+        # (I = 2/5 M R²), from its velocities
+        pr = case.scenario.projectile
+        w = hist["angular_velocity"].values
+        u = hist["projectile_velocity"].values
+        lost = 0.5 * pr.mass * (u[0] @ u[0] - u[-1] @ u[-1]) + 0.5 * 0.4 * pr.mass \
+            * pr.radius**2 * (w[0] @ w[0] - w[-1] @ w[-1])
+        assert float(at["energy_absorbed"]) == pytest.approx(lost, rel=1e-9)
+        assert lost > 1.0
         assert str(at["status"].values) == res.status
     # the cases are four different runs
     assert len(set(ds["max_deflection"].values.ravel().tolist())) == 4
