@@ -49,14 +49,25 @@ def _type_checking_nodes(tree: ast.AST) -> set[ast.AST]:
 
 
 def _imported(path: Path) -> list[str]:
-    """Every emfabric module a file imports, at module level or inside a function."""
+    """Every emfabric module a file imports, at module level or inside a function; a relative
+    import (`from ..runner import x`) by the absolute name it resolves to."""
     tree = ast.parse(path.read_text(encoding="utf-8"))
     skip = _type_checking_nodes(tree)
+    # the file's package, dotted: src/emfabric/sim/state.py -> emfabric.sim
+    package = ".".join(path.relative_to(SRC.parent).with_suffix("").parts)
+    if path.name != "__init__.py":
+        package = package.rsplit(".", 1)[0]
     out = []
     for node in ast.walk(tree):
         if node in skip:
             continue
-        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("emfabric"):
+        if isinstance(node, ast.ImportFrom) and node.level > 0:
+            base = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+            module = f"{base}.{node.module}" if node.module else base
+            out.append(module)
+            out.extend(f"{module}.{a.name}" for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and \
+                node.module.startswith("emfabric"):
             out.append(node.module)
             out.extend(f"{node.module}.{a.name}" for a in node.names)
         elif isinstance(node, ast.Import):
@@ -260,3 +271,18 @@ def test_layer_docstrings_say_what_the_test_allows():
         said = doc.split("May import:")[1].split(".")[0]
         named = {m for m in re.findall(rf"(?<![\w.])({names})(?![\w])", said)}
         assert named == allowed, f"{layer}: the docstring names {named}, the test {allowed}"
+
+
+def test_relative_imports_are_seen_by_their_absolute_names(tmp_path, monkeypatch):
+    """The layer and cycle tests read every import: `from ..runner import loop` in sim/ is
+    emfabric.runner (and .loop), as `from emfabric.runner import loop` would be."""
+    import sys
+
+    here = sys.modules[__name__]
+    root = tmp_path / "emfabric"
+    (root / "sim").mkdir(parents=True)
+    f = root / "sim" / "x.py"
+    f.write_text("from ..runner import loop\nfrom . import state\nfrom .model import M\n")
+    monkeypatch.setattr(here, "SRC", root)
+    assert _imported(f) == ["emfabric.runner", "emfabric.runner.loop", "emfabric.sim",
+                            "emfabric.sim.state", "emfabric.sim.model", "emfabric.sim.model.M"]

@@ -490,3 +490,10 @@ def test_ballistic_limit_end_to_end(tmp_path):
     assert lj["v_bl"] <= hi and lj["rms_residual"] < 0.1 * hi
     ds = xr.open_dataset(tmp_path / "ballistic.nc")
     assert ds.sizes["shot"] == out["runs"] and (tmp_path / "ballistic.png").is_file()
+    # MODEL §7's {"a", "p", "v_bl"}: the curve v_r = a (v_s^p − V_BL^p)^(1/p) they give, at the
+    # perforating shots of ballistic.nc, has the fit's residual (0 < a ≤ 1, p ≥ 1: v_r ≤ v_s)
+    assert 0.0 < lj["a"] <= 1.0 and lj["p"] >= 1.0
+    through = ds.perforated.values == 1
+    vs, vr = ds.striking_speed.values[through], ds.residual_speed.values[through]
+    curve = lj["a"] * np.maximum(vs ** lj["p"] - lj["v_bl"] ** lj["p"], 0.0) ** (1 / lj["p"])
+    assert np.sqrt(np.mean((curve - vr) ** 2)) == pytest.approx(lj["rms_residual"], rel=1e-6)
