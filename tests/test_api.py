@@ -137,3 +137,18 @@ def test_numpy_values_are_overrides_like_any_other():
     assert sc == load_scenario("paper-field", {"fabric.material.seed": 3,
                                                "fabric.nodes": [30, 30],
                                                "projectile.velocity": [0.0, 0.0, -250.0]})
+
+
+def test_the_summary_has_one_schema_with_or_without_a_projectile():
+    """A script reads one set of summary keys: the fabric alone (projectile.shape = "none")
+    gives the same keys as an impact, the projectile's figures NaN (null in --json) and
+    perforation undecided (-1)."""
+    import math
+
+    impact = emfabric.run(_small()).summary
+    alone = emfabric.run(make(**{"fabric.nodes": [9, 9], "projectile.shape": "none",
+                                 "solver.end_time": 1e-6})).summary
+    assert sorted(alone) == sorted(impact)
+    assert all(math.isnan(c) for c in alone["final_velocity_m_s"])
+    assert math.isnan(alone["max_tilt_deg"]) and alone["perforated"] == -1
+    assert alone["plies"] == 1 and alone["plies_perforated"] == -1

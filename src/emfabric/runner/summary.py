@@ -107,9 +107,13 @@ def summarize(result) -> dict[str, Any]:
             "plies_perforated": plies_perforated(m, st, ds),
         })
     else:
-        out.update({"final_omega_rad_s": [math.nan] * 3, "residual_speed_m_s": math.nan,
+        # the fabric alone: the same keys (a script reads one schema), the projectile's figures
+        # not a number (null in --json), perforation undecided
+        out.update({"final_velocity_m_s": [math.nan] * 3, "residual_speed_m_s": math.nan,
+                    "final_omega_rad_s": [math.nan] * 3, "max_tilt_deg": math.nan,
                     "max_tilt_rad": math.nan, "max_yaw_rad": math.nan,
-                    "energy_absorbed_J": math.nan, "perforated": -1})
+                    "energy_absorbed_J": math.nan, "perforated": -1,
+                    "plies": m.ply_count, "plies_perforated": -1})
     # is the actuation physical? (emfabric.sim.plausibility; docs/theory.md §3.1)
     act = actuation_report(m)
     out.update({
