@@ -53,30 +53,17 @@ def _warn_actuation(scenario, what: str) -> None:
     emfabric.sim.plausibility) — once, before its runs, each as "warning: WHAT: …": the runs
     on the workers keep theirs to their case records (studies.sweep.run_case), which would
     print them once per case."""
-    import logging
-
     from emfabric.cli.run import warn
     from emfabric.sim.builder import build_model
     from emfabric.sim.plausibility import actuation_report
+    from emfabric.studies.sweep import captured_warnings
 
-    class Kept(logging.Handler):
-        def __init__(self) -> None:
-            super().__init__(logging.WARNING)
-            self.lines: list[str] = []
-
-        def emit(self, record: logging.LogRecord) -> None:
-            self.lines.append(record.getMessage())
-
-    logger = logging.getLogger("emfabric")
-    kept = Kept()
-    logger.addHandler(kept)
-    try:
-        found = actuation_report(build_model(scenario, writes=False))["warnings"]
-    except (ValueError, RuntimeError):
-        return  # the study reports an unbuildable scenario itself
-    finally:
-        logger.removeHandler(kept)
-    for w in [*kept.lines, *found]:
+    with captured_warnings() as built:  # what building it logs
+        try:
+            found = actuation_report(build_model(scenario, writes=False))["warnings"]
+        except (ValueError, RuntimeError):
+            return  # the study reports an unbuildable scenario itself
+    for w in [*built, *found]:
         warn(f"{what}: {w}")
 
 

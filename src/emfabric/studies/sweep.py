@@ -296,7 +296,7 @@ def run_case(text: str, out: str | None, threads: int, explicit: bool = False
     # would print from every worker, once per case and without the command's "warning:": the
     # command that started the study prints the first case's once (cli.study._warn_actuation)
     # and each case keeps its own in its record (cases/<key>.json, "warnings")
-    with _CaseLog.capture() as warned:
+    with captured_warnings() as warned:
         try:
             result = run(sc, out, threads=threads if explicit else None)
         except (DivergenceError, OSError, RuntimeError, ValueError, ArithmeticError) as exc:
@@ -312,32 +312,34 @@ def run_case(text: str, out: str | None, threads: int, explicit: bool = False
     return metrics
 
 
-class _CaseLog(logging.Handler):
-    """emfabric's log records in a process that runs study cases (a Dask worker): kept with
-    the case that the thread emitting them runs (`capture`), else dropped; never printed
-    (without a handler of its own, Python's last-resort handler would print each warning bare
-    on the worker's stderr, which a local cluster's workers share with the terminal)."""
+class _ThreadWarnings(logging.Handler):
+    """The warnings one thread logs (captured_warnings)."""
 
-    _local = threading.local()
+    def __init__(self, thread: int) -> None:
+        super().__init__(logging.WARNING)
+        self.thread = thread
+        self.lines: list[str] = []
 
     def emit(self, record: logging.LogRecord) -> None:
-        lines = getattr(self._local, "lines", None)
-        if lines is not None and record.levelno >= logging.WARNING:
-            lines.append(record.getMessage())
+        if record.thread == self.thread:
+            self.lines.append(record.getMessage())
 
-    @classmethod
-    @contextlib.contextmanager
-    def capture(cls):
-        """The warnings logged by this thread inside the block, as a list (filled as they
-        come); installs the handler on the "emfabric" logger once per process."""
-        logger = logging.getLogger("emfabric")
-        if not any(isinstance(h, cls) for h in logger.handlers):
-            logger.addHandler(cls())
-        cls._local.lines = lines = []
-        try:
-            yield lines
-        finally:
-            cls._local.lines = None
+
+@contextlib.contextmanager
+def captured_warnings():
+    """The warnings this thread logs to emfabric's logger inside the block, as a list (filled
+    as they come), kept from the terminal: while a handler is attached, Python's last-resort
+    handler, which would print each warning bare on stderr (a local cluster's workers share
+    the terminal's), stays out. Another thread's records are not this block's (a worker may
+    run cases in several threads, each in a block of its own); a handler of the process's own
+    (the CLI's) still gets every record."""
+    handler = _ThreadWarnings(threading.get_ident())
+    logger = logging.getLogger("emfabric")
+    logger.addHandler(handler)
+    try:
+        yield handler.lines
+    finally:
+        logger.removeHandler(handler)
 
 
 def _failed(message: str, wall: float) -> dict[str, Any]:
