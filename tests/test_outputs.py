@@ -206,6 +206,47 @@ def test_interrupt_leaves_partial_history(tmp_path):
     assert not list(tmp_path.glob(".*partial*"))
 
 
+def test_a_run_without_projectile_records_its_variables_as_nan(tmp_path):
+    """projectile.shape = "none": the variables of the projectile itself are not a number in
+    history.nc (as written during the run, when it ends and after a resume) and in memory;
+    its momenta, kinetic energy and contact force are 0; the fabric's are recorded (the same
+    records as without the interruption)."""
+    from emfabric.io.history import NO_PROJECTILE
+    from emfabric.runner.loop import resume
+
+    from conftest import fabric_only
+
+    sc = fabric_only(**{"fabric.nodes": [7, 7], "field.B": [0.5, 0.0, 0.0],
+                        "fabric.velocity": [0.0, 0.0, 1.0], "solver.end_time": 2e-5})
+    ref = run(sc).history
+    assert all(np.isnan(ref[n].values).all() for n in NO_PROJECTILE)
+    calls = []
+
+    def progress(state, info):
+        calls.append(state.t)
+        if len(calls) == 4:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        run(sc, tmp_path, progress=progress)
+    with xr.open_dataset(tmp_path / "history.nc") as part:
+        assert part.attrs["has_projectile"] == 0 and part.sizes["time"] == 5
+        assert all(np.isnan(part[n].values).all() for n in NO_PROJECTILE)
+    whole = resume(tmp_path).history
+    with xr.open_dataset(tmp_path / "history.nc") as ds:
+        for h in (ds, whole):
+            assert h.sizes["time"] > 5
+            for name in NO_PROJECTILE:
+                assert np.isnan(h[name].values).all(), name
+            for name in ("projectile_momentum", "kinetic_energy_projectile", "contact_force"):
+                assert (h[name].values == 0.0).all(), name
+            # the fabric's records are those of the run without the interruption
+            for name in ("fabric_momentum", "kinetic_energy_fabric", "max_deflection"):
+                np.testing.assert_array_equal(h[name].values, ref[name].values)
+            assert np.abs(h["fabric_momentum"].values).max() > 0.0
+        assert "no projectile" in ds["tilt"].attrs["comment"]
+
+
 def test_cli_run_validate_scenarios(tmp_path):
     """The command line runs a scenario with overrides and prints a summary; errors exit 2."""
     exe = [sys.executable, "-m", "emfabric"]

@@ -55,11 +55,24 @@ class Recorder:
         return rows_to_dataset(self._rows[start: self.count], attrs)
 
 
+NO_PROJECTILE = ("projectile_position", "projectile_velocity", "angular_velocity",
+                 "projectile_nose", "tilt", "yaw")
+"""The variables that describe the projectile itself: not a number in the history of a run
+without one (projectile.shape = "none"; the attribute has_projectile = 0). Its momenta, kinetic
+energy and contact force are 0, as the sums of the fabric and the projectile take them."""
+
+
 def rows_to_dataset(rows: np.ndarray, attrs: dict[str, str]) -> xr.Dataset:
+    """The records as a Dataset with these global attributes; where they say has_projectile =
+    0, the NO_PROJECTILE variables are NaN (the rows hold the scenario's unused pose)."""
+    body = bool(int(attrs.get("has_projectile", 1)))
     data = {}
     for name, (width, units, long_name) in VARIABLES.items():
         col = rows[:, LAYOUT[name]]
         meta = {"units": units, "long_name": long_name}
+        if not body and name in NO_PROJECTILE:
+            col = np.full(col.shape, np.nan)
+            meta["comment"] = 'no projectile (projectile.shape = "none")'
         if width == 3:
             data[name] = (("time", "xyz"), col.copy(), meta)
         else:
@@ -119,7 +132,7 @@ def append_history(path: Path, rows: np.ndarray, attrs: dict[str, str], written:
         return rows.shape[0]
     if rows.shape[0] == 0:
         return written
-    ds = rows_to_dataset(rows, {})
+    ds = rows_to_dataset(rows, attrs)
     names = ("time", *VARIABLES, *(n for n in PLY_RECORD if n in ds))
     return append_records(path, "time", {name: ds[name].values for name in names})
 
