@@ -238,7 +238,8 @@ def test_a_run_without_projectile_records_its_variables_as_nan(tmp_path):
             assert h.sizes["time"] > 5
             for name in NO_PROJECTILE:
                 assert np.isnan(h[name].values).all(), name
-            for name in ("projectile_momentum", "kinetic_energy_projectile", "contact_force"):
+            for name in ("projectile_momentum", "projectile_angular_momentum",
+                         "kinetic_energy_projectile", "contact_force"):
                 assert (h[name].values == 0.0).all(), name
             # the fabric's records are those of the run without the interruption
             for name in ("fabric_momentum", "kinetic_energy_fabric", "max_deflection"):
