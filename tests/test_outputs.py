@@ -187,17 +187,22 @@ def test_same_seed_same_history():
     assert not np.array_equal(a.angular_velocity.values, c.angular_velocity.values)
 
 
-def test_interrupt_leaves_partial_history(tmp_path):
-    """Ctrl-C mid-run leaves a readable history marked partial, with the steps done so far."""
+def interrupt_after(steps: int):
+    """A progress callback that raises KeyboardInterrupt (Ctrl-C) at its `steps`-th step."""
     calls = []
 
     def progress(state, info):
         calls.append(state.t)
-        if len(calls) == 5:
+        if len(calls) == steps:
             raise KeyboardInterrupt
 
+    return progress
+
+
+def test_interrupt_leaves_partial_history(tmp_path):
+    """Ctrl-C mid-run leaves a readable history marked partial, with the steps done so far."""
     with pytest.raises(KeyboardInterrupt):
-        run(make(**SMALL), tmp_path, progress=progress)
+        run(make(**SMALL), tmp_path, progress=interrupt_after(5))
     ds = xr.open_dataset(tmp_path / "history.nc")
     assert ds.attrs["status"] == "partial"
     assert "interrupted" in ds.attrs["end_reason"]
@@ -220,15 +225,8 @@ def test_a_run_without_projectile_records_its_variables_as_nan(tmp_path):
                         "fabric.velocity": [0.0, 0.0, 1.0], "solver.end_time": 2e-5})
     ref = run(sc).history
     assert all(np.isnan(ref[n].values).all() for n in NO_PROJECTILE)
-    calls = []
-
-    def progress(state, info):
-        calls.append(state.t)
-        if len(calls) == 4:
-            raise KeyboardInterrupt
-
     with pytest.raises(KeyboardInterrupt):
-        run(sc, tmp_path, progress=progress)
+        run(sc, tmp_path, progress=interrupt_after(4))
     with xr.open_dataset(tmp_path / "history.nc") as part:
         assert part.attrs["has_projectile"] == 0 and part.sizes["time"] == 5
         assert all(np.isnan(part[n].values).all() for n in NO_PROJECTILE)
