@@ -22,10 +22,15 @@ the modified energy Ẽ = E − Σ (h²/8m)|f|² (f the node force without its m
 kick–drift–kick keeps where each step's trapezoid of the yarns' work is exact, every 2000
 steps, at each courant number of --long-courant: a gain of E that Ẽ does not share would be
 energy moved into the highest modes (bounded), one that both share is heating (theory §4.1).
+With --bulk-viscosity Q [Q ...], 6. the ringing sheet in the field with the yarns' linear bulk
+viscosity q (`solver.bulk_viscosity`, the damping ratio of the highest mode) at each courant
+number: whether damping the highest modes takes out the heating, and what it takes from the
+sheet (the viscous dissipation, `dissipation_viscous`), which the paper's model does not have.
 
     python scripts/ring_energy.py                      # courant 0.5 0.4 0.3 0.25, ~2 min
     python scripts/ring_energy.py --courant 0.5 0.25 --end-time 3e-4 --phi
     python scripts/ring_energy.py --long 2.4e-3 --long-courant 0.5 0.25   # ~12 min more
+    python scripts/ring_energy.py --courant 0.5 --bulk-viscosity 0.0002 0.001 0.005
 """
 
 from __future__ import annotations
@@ -44,18 +49,22 @@ RING = {"projectile.shape": "none", "fabric.velocity": [0.0, 0.0, -150.0],
         "solver.integrator": "central-difference"}
 
 
-def ring(courant: float | None, b: float, end_time: float) -> tuple[float, float, int]:
-    """(fabric energy at the end less at the start, the energy balance error at the end, steps)
-    of the ringing sheet; courant None: the φ-scheme at its defaults."""
+def ring(courant: float | None, b: float, end_time: float,
+         viscosity: float = 0.0) -> tuple[float, float, int, float]:
+    """(fabric energy at the end less at the start, the energy balance error at the end, steps,
+    the viscous dissipation) of the ringing sheet; courant None: the φ-scheme at its defaults;
+    viscosity: solver.bulk_viscosity (central differences)."""
     over = {**RING, "field.B": [b, 0.0, 0.0], "solver.end_time": end_time}
     if courant is None:
         over["solver.integrator"] = "phi"
     else:
         over["solver.courant"] = courant
+        over["solver.bulk_viscosity"] = viscosity
     sc = emfabric.load_scenario("paper-field", over)
     h = emfabric.run(sc, None).history
     e = (h.kinetic_energy_fabric + h.strain_energy + h.dissipation_damage).values
-    return float(e[-1] - e[0]), float(h.energy_balance_error[-1]), len(h.time) - 1
+    return (float(e[-1] - e[0]), float(h.energy_balance_error[-1]), len(h.time) - 1,
+            float(h.dissipation_viscous[-1]))
 
 
 def _stepped(courant: float, b: float, end_time: float):
@@ -183,6 +192,9 @@ def main() -> None:
     p.add_argument("--long", type=float, default=0.0, metavar="T",
                    help="5.: the ringing sheet in the field on to T [s] (0: not run)")
     p.add_argument("--long-courant", type=float, nargs="+", default=[0.5, 0.25])
+    p.add_argument("--bulk-viscosity", type=float, nargs="+", default=[], metavar="Q",
+                   help="6.: the ringing sheet in the field with solver.bulk_viscosity = Q, "
+                        "at each --courant")
     a = p.parse_args()
     logging.getLogger("emfabric").setLevel(logging.ERROR)
     print("1. the ringing sheet: fabric energy gained over the run [J] (balance error [J], steps)")
@@ -190,13 +202,13 @@ def main() -> None:
     for c in a.courant:
         cols = []
         for b in (0.0, a.field):
-            gain, balance, steps = ring(c, b, a.end_time)
+            gain, balance, steps, _ = ring(c, b, a.end_time)
             cols.append(f"{gain:+9.3f} ({balance:+7.3f}, {steps:5d})")
         print(f"{c:>9g} {cols[0]:>26} {cols[1]:>26}", flush=True)
     if a.phi:
         cols = []
         for b in (0.0, a.field):
-            gain, balance, steps = ring(None, b, a.end_time)
+            gain, balance, steps, _ = ring(None, b, a.end_time)
             cols.append(f"{gain:+9.3f} ({balance:+7.3f}, {steps:5d})")
         print(f"{'phi':>9} {cols[0]:>26} {cols[1]:>26}", flush=True)
     print(f"\n2. segments going slack or taut per step at courant {a.crossings_courant:g}")
@@ -219,6 +231,15 @@ def main() -> None:
         print(f"{'courant':>9} {'steps':>7} {'t [us]':>9} {'E':>10} {'E~':>10}")
         for c in a.long_courant:
             long_ring(c, a.field, a.long)
+    if a.bulk_viscosity:
+        print(f"\n6. the ringing sheet in B = {a.field:g} T with the bulk viscosity q: fabric "
+              "energy gained, viscous dissipation, their sum [J]")
+        print(f"{'courant':>9} {'q':>8} {'gained':>10} {'viscous':>10} {'sum':>10}")
+        for c in a.courant:
+            for q in a.bulk_viscosity:
+                gain, _, _, visc = ring(c, a.field, a.end_time, q)
+                print(f"{c:>9g} {q:>8g} {gain:+10.4f} {visc:10.4f} {gain + visc:+10.4f}",
+                      flush=True)
 
 
 if __name__ == "__main__":
