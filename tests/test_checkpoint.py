@@ -178,6 +178,59 @@ def test_cli_refuses_a_mismatched_resume(tmp_path):
     assert r.returncode == 2 and "nothing to resume" in r.stderr
 
 
+@pytest.mark.parametrize("integrator", ["central-difference", "phi"])
+def test_a_complete_run_continued_past_its_end_is_the_longer_run_to_the_bit(
+        uninterrupted, tmp_path, integrator):
+    """A run that reached its end_time, resumed with a later solver.end_time (the one change
+    a resume accepts), goes on to it and writes the history and snapshots of a run given the
+    later end from the start, bit for bit: its checkpoint holds the state before the last step,
+    which end_time cut short, and that step is taken again whole. Its files then carry the
+    later end in their scenario. An earlier end is refused, and so is a later one for a run
+    that ended by its stop rule."""
+    sc = {**SMALL, "solver.integrator": integrator}
+    if integrator == "central-difference":
+        longer = uninterrupted  # SMALL, to 300 µs
+    else:
+        sc["solver.end_time"] = longer_end = 120e-6
+        longer = tmp_path / "longer"
+        run(load_scenario("demo-small", sc), longer)
+    end = sc["solver.end_time"]
+    first = run(load_scenario("demo-small", {**sc, "solver.end_time": 0.45 * end}),
+                tmp_path / "x")
+    assert (first.status, first.end_reason) == ("complete", "end_time")
+    with pytest.raises(CheckpointError, match=r"solver\.end_time can only be made later"):
+        resume(tmp_path / "x", load_scenario("demo-small", {**sc, "solver.end_time": 0.3 * end}))
+    result = resume(tmp_path / "x", load_scenario("demo-small", sc))
+    assert (result.status, result.end_reason) == ("complete", "end_time")
+    assert float(result.history.time[-1]) == end
+    _same_files(tmp_path / "x", longer)
+    for name in ("history.nc", "snapshots.nc"):
+        with xr.open_dataset(tmp_path / "x" / name) as ds:
+            assert f"end_time = {end!r}" in ds.attrs["scenario"], name
+            assert ds.attrs["status"] == "complete"
+    assert read_checkpoint(tmp_path / "x" / CHECKPOINT)[0].solver.end_time == end
+    if integrator == "phi":
+        assert longer_end == end
+        return
+    # through the command line: the complete run says how to go further, and goes
+    r = subprocess.run([sys.executable, "-m", "emfabric", "run", "--resume", str(tmp_path / "x"),
+                        "-q"], capture_output=True, text=True)
+    assert r.returncode == 2 and "--set solver.end_time=T" in r.stderr, r.stderr
+    r = subprocess.run([sys.executable, "-m", "emfabric", "run", "--resume", str(tmp_path / "x"),
+                        "--set", "solver.end_time=0.00031", "-q", "--json"],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    with xr.open_dataset(tmp_path / "x" / "history.nc") as ds:
+        assert float(ds.time[-1]) == 0.00031 and ds.attrs["status"] == "complete"
+    # a run that ended by its stop rule (the sphere rebounded) is not continued
+    whole = tmp_path / "whole"
+    assert run(load_scenario("demo-small", {"fabric.nodes": [12, 12]}), whole).end_reason \
+        == "rebound"
+    with pytest.raises(CheckpointError, match="stop rule"):
+        resume(whole, load_scenario("demo-small", {"fabric.nodes": [12, 12],
+                                                   "solver.end_time": 1.0}))
+
+
 def test_history_is_appended_along_an_unlimited_time(tmp_path):
     """history.nc and snapshots.nc are record files: written as the run goes by appending."""
     interrupted_demo(tmp_path, SMALL, after=30)

@@ -82,12 +82,15 @@ def run(
         given = None
         if scenario is not None:
             given = _load(scenario, set_)
-        elif set_:  # overrides of the stored scenario: refused below unless they change nothing
+        elif set_:  # overrides of the stored scenario: refused below unless they change
+            # nothing or only make solver.end_time later (the run continued further)
             try:
                 given = apply_overrides(sc, dict(parse_override(o) for o in set_))
             except ScenarioError as err:
                 error(str(err))
                 raise typer.Exit(EXIT_INPUT) from None
+        if given is not None and given.solver.end_time > sc.solver.end_time:
+            sc = given  # the progress display's end (resume refuses any other change)
         out_dir = resume
 
         def start(progress_fn):

@@ -124,23 +124,36 @@ def read_checkpoint(path: Path) -> tuple[Scenario, str, State, RunPosition]:
     return scenario, str(ds.attrs.get("emfabric_version", "?")), state, pos
 
 
-def check_matches(scenario: Scenario, version: str, stored: Scenario, where: Path) -> None:
-    """Refuse to resume with another scenario or package version than the checkpoint's."""
+END_TIME = "solver.end_time"
+"""The one scenario key a resume may change: made later, it continues the run further."""
+
+
+def check_matches(scenario: Scenario, version: str, stored: Scenario, where: Path) -> bool:
+    """Refuse to resume with another scenario or package version than the checkpoint's, but for
+    a later solver.end_time: returns whether the scenario extends the stored one that way (the
+    run is continued past the end it had)."""
     from emfabric import __version__
 
     if version != __version__:
         raise CheckpointError(f"{where} was written by emfabric {version}, this is "
                               f"{__version__}: a resumed run would not continue the same "
                               f"computation; rerun it from the start")
-    if scenario.to_dict() != stored.to_dict():
-        mine, theirs = _flat(scenario.to_dict()), _flat(stored.to_dict())
-        keys = sorted(k for k in mine.keys() | theirs.keys() if mine.get(k) != theirs.get(k))
-        diff = "; ".join(f"{k}: checkpoint {theirs.get(k)!r}, given {mine.get(k)!r}"
-                         for k in keys[:5])
-        raise CheckpointError(f"the scenario does not match the checkpoint in {where} ({diff}"
-                              f"{' …' if len(keys) > 5 else ''}); resume with "
-                              f"`emfabric run --resume {where.parent}` alone to continue the "
-                              f"stored scenario")
+    if scenario.to_dict() == stored.to_dict():
+        return False
+    mine, theirs = _flat(scenario.to_dict()), _flat(stored.to_dict())
+    keys = sorted(k for k in mine.keys() | theirs.keys() if mine.get(k) != theirs.get(k))
+    if keys == [END_TIME]:
+        if mine[END_TIME] > theirs[END_TIME]:
+            return True
+        raise CheckpointError(f"{END_TIME} can only be made later on resume (checkpoint "
+                              f"{theirs[END_TIME]!r}, given {mine[END_TIME]!r}): a resumed run "
+                              f"is continued, not cut short")
+    diff = "; ".join(f"{k}: checkpoint {theirs.get(k)!r}, given {mine.get(k)!r}"
+                     for k in keys[:5])
+    raise CheckpointError(f"the scenario does not match the checkpoint in {where} ({diff}"
+                          f"{' …' if len(keys) > 5 else ''}); resume with "
+                          f"`emfabric run --resume {where.parent}` alone to continue the "
+                          f"stored scenario (a later {END_TIME} alone continues it further)")
 
 
 def _flat(d: dict, prefix: str = "") -> dict:

@@ -295,14 +295,18 @@ def snapshot_times(path: Path, count: int) -> list[float]:
     return [float(t) for t in read_records(path, "snapshot", count)["time"]]
 
 
-def truncate_snapshots(path: Path, count: int) -> None:
+def truncate_snapshots(path: Path, count: int, attrs: dict | None = None) -> None:
     """Keep only the first `count` snapshots of snapshots.nc (atomically): those written after
-    the checkpoint a run resumes from are taken again."""
+    the checkpoint a run resumes from are taken again. attrs: the global attributes the file
+    gets instead of its own (a run continued past its end: its scenario has the later
+    end_time)."""
     if count == 0:
         path.unlink(missing_ok=True)
         return
     with xr.open_dataset(path, mask_and_scale=False) as ds:
-        if ds.sizes["snapshot"] == count:
+        if ds.sizes["snapshot"] == count and attrs is None:
             return
         part = ds.isel(snapshot=slice(0, count)).load()
+    if attrs is not None:
+        part.attrs = {**part.attrs, **attrs}
     write_netcdf(part, path, unlimited="snapshot")

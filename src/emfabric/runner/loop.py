@@ -20,6 +20,7 @@ from emfabric.config.scenario import Scenario
 from emfabric.integrators import DivergenceError, StepInfo, check_threads, make_integrator
 from emfabric.io.checkpoint import (
     CHECKPOINT,
+    END_TIME,
     CheckpointError,
     RunPosition,
     check_matches,
@@ -135,8 +136,9 @@ def _resume(out: Path, scenario: Scenario | None, progress: ProgressFn | None,
             threads: int | None) -> RunResult:
     path = out / CHECKPOINT
     stored, version, state, pos = read_checkpoint(path)
-    check_matches(scenario if scenario is not None else stored, version, stored, path)
-    model = build_model(stored)
+    # a later solver.end_time alone continues the run further (check_matches)
+    extends = check_matches(scenario if scenario is not None else stored, version, stored, path)
+    model = build_model(scenario if extends else stored)
     if (state.node_x.shape != (3, model.node_count) or state.seg_alpha.shape
             != (model.seg_count,) or state.seg_strain.shape
             != model.physics.yarns.averaging_rate.shape):
@@ -144,14 +146,23 @@ def _resume(out: Path, scenario: Scenario | None, progress: ProgressFn | None,
     history = out / "history.nc"
     status = history_status(history)
     if status is not None and status[0] == "complete":
-        raise CheckpointError(f"the run in {out} is complete ({status[1]}): nothing to resume")
+        if status[1] != "end_time":
+            raise CheckpointError(
+                f"the run in {out} is complete ({status[1]}): nothing to resume; it ended by "
+                f"its stop rule (the projectile had left the fabric for good), which a later "
+                f"{END_TIME} would meet again at once")
+        if not extends:
+            raise CheckpointError(
+                f"the run in {out} is complete (end_time): nothing to resume; to continue it "
+                f"past its end, give a later end time: emfabric run --resume {out} --set "
+                f"{END_TIME}=T")
     try:
         rows = read_history_rows(history, pos.history_rows, model.ply_count)
         times = snapshot_times(out / "snapshots.nc", pos.snapshots)
     except (OSError, ValueError, KeyError) as err:
         raise CheckpointError(f"{out}: the history or snapshots written with the checkpoint "
                               f"cannot be read ({err})") from None
-    return _loop(model, state, (pos, rows, times), out, progress, None, threads)
+    return _loop(model, state, (pos, rows, times, extends), out, progress, None, threads)
 
 
 def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
@@ -203,7 +214,7 @@ def _run_loop(model: Model, s_in: State | None, resumed, out: Path | None,
         wall_before = 0.0
         written = 0
     else:
-        pos, rows, times = resumed
+        pos, rows, times, extends = resumed
         recorder = Recorder(rows, model.ply_count)
         snaps = Snapshots(model, out, times, paraview=_paraview(model),
                           background=vtu_beside)
@@ -214,7 +225,9 @@ def _run_loop(model: Model, s_in: State | None, resumed, out: Path | None,
             write_history(recorder.to_dataset(run_attributes(model, "partial", RUNNING,
                                                              wall_before)), out / "history.nc")
         with _naming(out / "snapshots.nc"):
-            truncate_snapshots(out / "snapshots.nc", pos.snapshots)
+            # continued past its end: the files say so (the later end_time in the scenario)
+            truncate_snapshots(out / "snapshots.nc", pos.snapshots, run_attributes(
+                model, "partial", RUNNING, wall_before) if extends else None)
         written = recorder.count
         log.info("resuming at t = %.6g s (step %d)", s_in.t, s_in.steps)
     s_out = s_in.copy()
@@ -226,10 +239,12 @@ def _run_loop(model: Model, s_in: State | None, resumed, out: Path | None,
         return wall_before + time.perf_counter() - wall0
 
     def save(status: str, reason: str, history: xr.Dataset | None = None,
-             regular: int | None = None) -> None:
+             regular: int | None = None,
+             at: tuple[State, RunPosition] | None = None) -> None:
         """Append the new records and snapshots (or write the whole `history` with its final
         attributes), then write the checkpoint: in this order, so that the checkpoint only
-        counts what is on disk."""
+        counts what is on disk. at: the checkpoint's state and position, where not the last
+        state and all that is written."""
         nonlocal written
         if out is None:
             return
@@ -251,12 +266,14 @@ def _run_loop(model: Model, s_in: State | None, resumed, out: Path | None,
                 mark_status(out / "snapshots.nc", status, reason)
         if model.scenario is None:
             return  # nothing to rebuild the Model from on resume
+        state, position = at if at is not None else (s_in, RunPosition(
+            written, snaps.count if regular is None else regular, next_snap, wall()))
         with _naming(out / CHECKPOINT):
-            write_checkpoint(out / CHECKPOINT, model, s_in, RunPosition(
-                written, snaps.count if regular is None else regular, next_snap, wall()))
+            write_checkpoint(out / CHECKPOINT, model, state, position)
 
     next_checkpoint = 0.0  # the first step is saved at once: a killed run always has files
     first_step = True
+    before_last = None  # (snapshots taken, next snapshot time) before the step in hand
     try:
         if resumed is None:
             # the initial record on disk before the step kernel compiles (seconds on a cold
@@ -266,6 +283,7 @@ def _run_loop(model: Model, s_in: State | None, resumed, out: Path | None,
         while s_in.t < t_end * (1 - 1e-12):
             if _STOP.is_set():
                 raise KeyboardInterrupt
+            before_last = (snaps.count, next_snap)
             info = integ.step(s_in, s_out, dt_limit=t_end - s_in.t)
             s_in, s_out = s_out, s_in
             row = recorder.new_row()
@@ -323,11 +341,18 @@ def _run_loop(model: Model, s_in: State | None, resumed, out: Path | None,
     total = wall()
     attrs = run_attributes(model, status, reason, total)
     ds = recorder.to_dataset(attrs)
+    at = None
+    if status == "complete" and reason == "end_time" and before_last is not None:
+        # the checkpoint of a run that reached end_time holds the state before its last step,
+        # which end_time cut short (s_out: the integrators leave a step's input untouched):
+        # continued past its end (a later solver.end_time on resume), the run takes that step
+        # whole, as a run given the later end from the start does, to the bit
+        at = (s_out, RunPosition(recorder.count - 1, *before_last, total))
     # the final attributes (status, end reason, wall time): one rewrite of history.nc per run;
     # a second Ctrl-C (or SIGTERM, SIGHUP) while the files are written waits for them
     with _signals_deferred():
         try:
-            save(status, reason, ds, regular)
+            save(status, reason, ds, regular, at)
         except OutputError as exc:
             log.error("%s; the files written before are kept%s", exc,
                       "" if model.scenario is None else
