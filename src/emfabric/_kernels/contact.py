@@ -50,9 +50,18 @@ def contact_impulse(m, v_node, v_surface, n, law, mode):
     mode 0 decides stick or slide by the Coulomb check; STICK or SLIDE imposes that decision
     (an attempt's late iterates keep the previous iterate's: the switch is a jump in J, and a
     fixed-point iteration across a jump cycles instead of converging)."""
-    jx = m * (v_surface[0] - v_node[0])
-    jy = m * (v_surface[1] - v_node[1])
-    jz = m * (v_surface[2] - v_node[2])
+    return coulomb_cone((m * (v_surface[0] - v_node[0]), m * (v_surface[1] - v_node[1]),
+                         m * (v_surface[2] - v_node[2])), n, law, mode)
+
+
+@njit(cache=True, inline="always")
+def coulomb_cone(j, n, law, mode):
+    """The impulse j that would make a contact of outward normal n stick, cut to what the
+    contact law gives, and whether it slides: nothing where its normal part would pull; j
+    itself where its tangential part is at most μ_s times the normal part (stick, eq. 4.8);
+    else the normal part and μ_d times it along the tangential part (slide, eq. 4.11). mode as
+    contact_impulse's."""
+    jx, jy, jz = j
     jn = jx * n[0] + jy * n[1] + jz * n[2]
     if jn > 0.0:
         tx = jx - jn * n[0]
@@ -366,7 +375,14 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, la
     contact, until none is inside (SEGMENT_INSIDE) and no contact point's velocity changes by
     more than SEGMENT_SETTLED of the body's speed (SEGMENT_SWEEPS passes at most, a guard),
     each contact's impulses adding up, so that the shared corrections converge to the full
-    ones; the later passes visit only the segments the first found in contact. As for
+    ones; the later passes visit only the segments the first found in contact. With lag > 0
+    (central differences) each pass adds its share of the stick impulse to the sum of the
+    passes' and cuts that sum to the Coulomb cone (coulomb_cone), so that the passes converge
+    to impulses that obey the contact law at every point at once; cut pass by pass, a pass
+    whose own normal impulse is small (a point already held) could not stop the slip its
+    neighbours gave it, and friction fell short of μ_d (docs/theory.md §5.2). The φ-scheme
+    (lag = 0) keeps the pass-by-pass cut: its fixed point did not converge across the sum's
+    stick and slide decisions. As for
     nodes, a segment in contact earlier in the step keeps its contact within
     shapes.contact_margin outside the surface (impulse, no move). Each node sums its warp and
     its fill contributions apart: the result does not depend on the order of the segments, so
@@ -446,7 +462,10 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, la
             vs = (vel[0] + wr[0], vel[1] + wr[1], vel[2] + wr[2])
             vp = (wa * v1[0, a] + wb * v1[0, b], wa * v1[1, a] + wb * v1[1, b],
                   wa * v1[2, a] + wb * v1[2, b])
-            j, _slid = contact_impulse(1.0 / k, vp, vs, nh, law, 0)
+            # the impulse that would make the point stick; cut to the law on the sum of the
+            # passes' impulses below (the cone of the contact's whole normal impulse)
+            m = 1.0 / k
+            j = (m * (vs[0] - vp[0]), m * (vs[1] - vp[1]), m * (vs[2] - vp[2]))
             if slot[idx] < 0:
                 seg_list[listed] = idx
                 listed += 1
@@ -493,15 +512,37 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, la
             scale = dep / total if total > 0.0 else 1.0
             # only a point inside is moved (to the surface); a kept contact outside is not
             move = scale / k if dep > keep else 0.0
-            for c in range(3):
-                c_imp[c, kc] += scale * tmp[c, idx]
-            worst = max(worst, scale * k * math.sqrt(tmp[0, idx] ** 2 + tmp[1, idx] ** 2
-                                                     + tmp[2, idx] ** 2))
+            if lag > 0.0:
+                # the passes' impulses so far plus this pass's share of the stick impulse, cut
+                # to the Coulomb cone as a whole: a pass whose own normal impulse is small (the
+                # point already held) still stops the slip its neighbours' impulses gave it,
+                # as far as the contact's whole normal impulse allows
+                total_j, _slid = coulomb_cone(
+                    (c_imp[0, kc] + scale * tmp[0, idx], c_imp[1, kc] + scale * tmp[1, idx],
+                     c_imp[2, kc] + scale * tmp[2, idx]),
+                    (c_nrm[0, kc], c_nrm[1, kc], c_nrm[2, kc]), law, 0)
+                dj = (total_j[0] - c_imp[0, kc], total_j[1] - c_imp[1, kc],
+                      total_j[2] - c_imp[2, kc])
+                for c in range(3):
+                    c_imp[c, kc] = total_j[c]
+                worst = max(worst, k * math.sqrt(dj[0] ** 2 + dj[1] ** 2 + dj[2] ** 2))
+                f = 1.0
+            else:
+                # the φ-scheme: each pass's share cut to the cone of its own normal impulse
+                cut, _slid = coulomb_cone((tmp[0, idx], tmp[1, idx], tmp[2, idx]),
+                                          (c_nrm[0, kc], c_nrm[1, kc], c_nrm[2, kc]), law, 0)
+                dj = (scale * cut[0], scale * cut[1], scale * cut[2])
+                for c in range(3):
+                    c_imp[c, kc] += dj[c]
+                worst = max(worst, scale * k * math.sqrt(cut[0] ** 2 + cut[1] ** 2
+                                                         + cut[2] ** 2))
+                f, dj = scale, cut
+            # each end node's velocity change: its share w/m of the impulse f × dj
             for node, w in ((a, wa), (b, wb)):
                 wi = w * inv_mass[node]
                 for c in range(3):
                     acc[0, fam, c, node] += wi * move * tmp[3 + c, idx]
-                    acc[1, fam, c, node] += wi * scale * tmp[c, idx]
+                    acc[1, fam, c, node] += wi * f * dj[c]
         for i in range(listed):
             idx = seg_list[i]
             for node in (ends[seg_cand[idx], 0], ends[seg_cand[idx], 1]):
