@@ -297,9 +297,9 @@ def snapshot_times(path: Path, count: int) -> list[float]:
 
 def truncate_snapshots(path: Path, count: int, attrs: dict | None = None) -> None:
     """Keep only the first `count` snapshots of snapshots.nc (atomically): those written after
-    the checkpoint a run resumes from are taken again. attrs: the global attributes the file
-    gets instead of its own (a run continued past its end: its scenario has the later
-    end_time)."""
+    the checkpoint a run resumes from are taken again. attrs: global attributes that replace
+    the file's own of the same names (a run continued past its end: its scenario, with the
+    later end_time, and its status), the file rewritten even at the same count."""
     if count == 0:
         path.unlink(missing_ok=True)
         return
