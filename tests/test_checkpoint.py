@@ -191,7 +191,7 @@ def test_a_complete_run_continued_past_its_end_is_the_longer_run_to_the_bit(
     if integrator == "central-difference":
         longer = uninterrupted  # SMALL, to 300 µs
     else:
-        sc["solver.end_time"] = longer_end = 120e-6
+        sc["solver.end_time"] = 120e-6
         longer = tmp_path / "longer"
         run(load_scenario("demo-small", sc), longer)
     end = sc["solver.end_time"]
@@ -210,7 +210,6 @@ def test_a_complete_run_continued_past_its_end_is_the_longer_run_to_the_bit(
             assert ds.attrs["status"] == "complete"
     assert read_checkpoint(tmp_path / "x" / CHECKPOINT)[0].solver.end_time == end
     if integrator == "phi":
-        assert longer_end == end
         return
     # through the command line: the complete run says how to go further, and goes
     r = subprocess.run([sys.executable, "-m", "emfabric", "run", "--resume", str(tmp_path / "x"),
