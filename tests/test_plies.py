@@ -400,6 +400,25 @@ def test_a_ply_pressed_onto_the_next_by_a_field(integrator, pull):
     assert abs(float(h.energy_balance_error[-1])) < 1e-9 * float(h.work_field[-1])
 
 
+def _three_rigid_plies(size=0.002, **kw):
+    """Three free plies of 2 × 2 nodes, size × size, stacked at the contact distance, no
+    field, no projectile, central differences: (model, integrator, initial state, the three
+    plies' node slices from the top)."""
+    from emfabric.integrators import make_integrator
+    from emfabric.sim.state import initial_state
+
+    sc = make(**{"fabric.nodes": [2, 2], "fabric.size": [size, size], "fabric.plies": 3,
+                 "fabric.rescale": False, "fabric.edges": "free", "fabric.damage.rate": 0.0,
+                 "fabric.material.modulus_cv": 0.0, "fabric.charge_per_node": 0.0,
+                 "field.B": [0, 0, 0], "field.E": [0, 0, 0], "projectile.shape": "none",
+                 "solver.integrator": "central-difference", **kw})
+    model = build_model(sc)
+    nodes = model.nodes
+    assert np.all(nodes.mass == nodes.mass[0])
+    plies = tuple(slice(nodes.ply_nodes[p], nodes.ply_nodes[p + 1]) for p in range(3))
+    return model, make_integrator(model), initial_state(model), plies
+
+
 def test_the_projectile_brings_the_pack_below_to_its_speed_within_one_step():
     """Three free rigid 2 × 2 plies, overlapping by a tenth of the contact distance d: the top
     ply's nodes held by the projectile (State.contact[3]), moving down at V, the two below at
@@ -410,23 +429,12 @@ def test_the_projectile_brings_the_pack_below_to_its_speed_within_one_step():
     they slowed and parted from the ply below after the first one, which left plies 2 and 3
     at −V/2 (and the push went on a step later; docs/theory.md §5.1)."""
     from emfabric._kernels.plies import ply_contact
-    from emfabric.integrators import make_integrator
-    from emfabric.sim.state import initial_state
 
-    sc = make(**{"fabric.nodes": [2, 2], "fabric.size": [0.002, 0.002], "fabric.plies": 3,
-                 "fabric.rescale": False, "fabric.edges": "free", "fabric.damage.rate": 0.0,
-                 "fabric.material.modulus_cv": 0.0, "fabric.charge_per_node": 0.0,
-                 "field.B": [0, 0, 0], "field.E": [0, 0, 0], "projectile.shape": "none",
-                 "solver.integrator": "central-difference"})
-    model = build_model(sc)
-    integ = make_integrator(model)
-    state = initial_state(model)
+    model, integ, state, (top, mid, low) = _three_rigid_plies()
     phys, nodes = integ.physics, model.nodes
     gap = float(phys.contact.ply_gap.min())
     m = float(nodes.mass[0])
-    assert np.all(nodes.mass == m)
     x, v = state.arrays.x.copy(), state.arrays.v.copy()
-    top, mid, low = (slice(nodes.ply_nodes[p], nodes.ply_nodes[p + 1]) for p in range(3))
     x[2, top] -= 0.1 * gap
     x[2, low] += 0.1 * gap
     speed = 100.0
@@ -445,3 +453,43 @@ def test_the_projectile_brings_the_pack_below_to_its_speed_within_one_step():
     # no ply passes through the next: every gap opened to the contact distance
     assert float(x[2, top].min() - x[2, mid].max()) >= 0.99 * gap
     assert float(x[2, mid].min() - x[2, low].max()) >= 0.99 * gap
+
+
+def test_ply_friction_obeys_coulombs_law_over_the_step_sweeps():
+    """Three free rigid 2 × 2 plies: the top one held, tilted by θ about y (tan θ = 0.25) and
+    moving down at V; the middle one parallel to it, at rest; the bottom one level and sliding
+    along x at W = 2V. μ_s = 0.5, μ_d = 0.3. The step's sweeps converge to the middle ply
+    stuck to the top one (v = (0, 0, −V), closed form): the impulse across their interface,
+    m(0, 0, −V) less what the bottom ply gave the middle one, leans from the top ply's normal by
+    0.27–0.28 in tangent (the pairs' summed impulses, records.Work.ply_sum), inside the static
+    cone. The bottom ply's friction
+    reaches the middle one sweep by sweep, each piece with μ_d of its own normal impulse about
+    the bottom ply's normal: about the tilted normal above, a piece leans (μ_d + tan θ)/(1 −
+    μ_d tan θ) = 0.59 > μ_s. Each sweep's impulse cut to the cone of its own normal impulse,
+    as before, slid every such piece, and a node of the middle ply kept 4.3 m/s of the bottom
+    ply's slip along x (4 % of V); with the step's summed impulse cut to the cone, the pair
+    sticks (docs/theory.md §5.1)."""
+    from emfabric._kernels.plies import ply_contact
+
+    size = 0.0005
+    model, integ, state, (top, mid, low) = _three_rigid_plies(
+        size, **{"contact.static_friction": 0.5, "contact.dynamic_friction": 0.3})
+    gap = float(integ.physics.contact.ply_gap.min())
+    x, v = state.arrays.x.copy(), state.arrays.v.copy()
+    slope = -0.25
+    centre = x[0, top].mean()
+    x[2, top] -= 0.03 * gap + slope * (x[0, top] - centre)
+    x[2, mid] -= slope * (x[0, mid] - centre)
+    x[2, low] += 0.3 * gap
+    speed = 100.0
+    v[2, top] = -speed
+    v[0, low] = 2.0 * speed
+    held = np.zeros(model.node_count)
+    held[top] = 1.0
+    v_top = v[:, top].copy()
+    ply_contact(integ.physics, state.arrays, x, v, integ.work, 1e-8, held)
+    # stuck to the top ply's velocity before the sweeps (the held nodes take −ΣJ only after
+    # them), within the sweeps' convergence (PLY_VELOCITY_TOLERANCE)
+    np.testing.assert_allclose(v[:, mid], v_top, atol=0.01 * speed)
+    # and the bottom ply still slides under it, slowed
+    assert np.all(v[0, low] > v[0, mid] + speed)

@@ -1,5 +1,5 @@
 """Ply-to-ply contact: neighbouring plies of a pack meet with the stick/slip impulse law of the
-projectile's contact (contact.contact_impulse), both ways, with exact action and reaction.
+projectile's contact (contact.coulomb_cone), both ways, with exact action and reaction.
 
 A node n of ply q meets the surface of its neighbour ply p through the nodes of p nearest to it:
 k0, the nearest node of p (a walk over p's grid from the node k that was nearest in the
@@ -9,10 +9,14 @@ t_i × t_j of p's grid, oriented from p towards q), the gap g = (x_n − x_k)·N
 distance r² = |x_n − x_k|² − g². Its share of the contact is w_k/Σw with w = (1 − r²/ρ²)² for r
 < ρ (Contact.ply_reach) and |g| < ρ. Where g < Contact.ply_gap (the sum of the two plies' yarn
 radii) and g > −gap, the pair (n, k) with the reduced mass m_nk = 1/(1/m_n + 1/m_k) gets its share
-of the impulse J = contact_impulse(m_nk, v_n, v_k, N_k) (inelastic in N_k, stick or slide in the
-plane) and of the placement that opens the gap to ply_gap: +J on n and −J on k, the placement
-split by the inverse masses (the centre of mass stays). Every node of p meets q and every node
-of q meets p, each pass with half of its share (a node above a node is one pair, seen twice).
+of the stick impulse m_nk (v_k − v_n) (inelastic in N_k, stick in the plane) and of the
+placement that opens the gap to ply_gap: +J on n and −J on k, the placement split by the inverse
+masses (the centre of mass stays). Central differences' sweeps (ply_contact) meet a pair again
+and again in a step: each adds its share of the stick impulse to the pair's sum over the step's
+sweeps so far and cuts that sum to the Coulomb cone of N_k (contact.coulomb_cone: stick within
+μ_s, else slide with μ_d), so that the sweeps converge to impulses that obey the contact law
+for the step as a whole (records.Work.ply_sum). Every node of p meets q and every node of q
+meets p, each pass with half of its share (a node above a node is one pair, seen twice).
 
 All pairs are computed from the same state and their impulses and mass-weighted placements are
 summed per node in integers (units Contact.ply_quantum): the sum does not depend on the order of
@@ -29,7 +33,7 @@ import math
 import numpy as np
 from numba import int64, njit
 
-from emfabric._kernels.contact import contact_impulse, ply_penalty
+from emfabric._kernels.contact import coulomb_cone, ply_penalty
 from emfabric._kernels.fields import magnetic_force, node_field_of, uniform_field
 from emfabric._kernels.records import ROW_COUNT
 
@@ -132,18 +136,19 @@ def _dist2(x, a, b):
 def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, penalty):
     """The nodes of ply `slave` against the surface of ply `master` (normals nrm of master's
     nodes, times sign to point towards slave): impulses and placements into acc (integers).
-    nearest = (guess, near, memo, stamp, epoch): the reference-nearest master node of each
+    nearest = (guess, near, memo, stamp, epoch, sums): the reference-nearest master node of each
     node, and each node's nearest master node, written where the walk finds it; in the sweeps
     of impulses alone (place False: the positions do not change between them) each node's
     shares, gaps, their total and whether one acts, kept in memo[n] (records.Work.ply_memo)
-    with stamp[n] = epoch the first time and read from there after; shares: scratch, (2, box count):
-    each box node's w and gap; boxes = (box, hot): master's _region, and the nodes to meet
-    (below); penalty = (stiffness, φΔt, start-of-step
-    velocities, driven, place): a stiffness > 0 takes the φ-scheme's penalty law instead
-    (ply_forces): forces into acc[0], nothing into acc[1]; driven (node_count,) or empty:
-    nonzero for the nodes the projectile drives (central differences: ply_contact); place:
-    False gives the impulses alone, no placements (ply_contact's sweeps once the placements
-    have converged: PLY_VELOCITY_SWEEPS).
+    with stamp[n] = epoch the first time and read from there after; sums = (summed, at, stamp):
+    each pair's impulse summed over this call's sweeps (records.Work.ply_sum, ply_sum_at,
+    ply_sum_stamp; unused by the φ-scheme's forces); shares: scratch, (5, box count): each
+    box node's w and gap (and _move_sums's); boxes = (box, hot): master's _region, and the
+    nodes to meet (below); penalty = (stiffness, φΔt, start-of-step velocities, driven, place):
+    a stiffness > 0 takes the φ-scheme's penalty law instead (ply_forces): forces into acc[0],
+    nothing into acc[1]; driven (node_count,) or empty: nonzero for the nodes the projectile
+    drives (central differences: ply_contact); place: False gives the impulses alone, no
+    placements (ply_contact's sweeps once the placements have converged: PLY_VELOCITY_SWEEPS).
     With hot[0] ≠ 0, only the slave nodes in slave's grid box hot[1:5] (i_lo, i_hi, j_lo,
     j_hi), or whose nearest master node (near) lies within one box (Contact.ply_box) plus one
     node of master's grid box hot[5:9], are met: the nodes ply_contact's later sweeps revisit.
@@ -153,7 +158,8 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, pen
     distance, at least the contact distance (the transverse wave has not come). Only there
     does ply contact cost less than its full pass."""
     nodes, law = phys.nodes, phys.contact
-    guess, near, memo, stamp, epoch = nearest
+    guess, near, memo, stamp, epoch, sums = nearest
+    summed, summed_at, summed_stamp = sums
     box, hot = boxes
     inv_mass, mass = nodes.inv_mass, nodes.mass
     m0 = nodes.ply_nodes[master]
@@ -229,6 +235,18 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, pen
                 stamp[n] = epoch
             if not acting:
                 continue
+        if not forces:
+            # the impulses n's pairs have had in this call's sweeps, by box position around
+            # its nearest master node: none yet, or moved with the box where that changed
+            at = m0 + cj * mnx + ci
+            if summed_stamp[n] != epoch:
+                summed_stamp[n] = epoch
+                summed_at[n] = at
+                for b in range(3 * count):
+                    summed[n, b] = 0.0
+            elif summed_at[n] != at:
+                _move_sums(summed, n, summed_at[n] - m0, (ci, cj, mnx, bi, bj), shares)
+                summed_at[n] = at
         for dj in range(-bj, bj + 1):
             for di in range(-bi, bi + 1):
                 w = shares[0, (dj + bj) * wide + di + bi]
@@ -262,11 +280,25 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, pen
                     m_nk = mass[km]
                 elif not move_k:
                     m_nk = mass[n]
-                j, _slid = contact_impulse(m_nk, (v[0, n], v[1, n], v[2, n]),
-                                           (v[0, km], v[1, km], v[2, km]), nh, law, 0)
+                # the pair's share of the stick impulse added to what the step's sweeps gave it
+                # so far, and that sum cut to the Coulomb cone: a sweep whose own normal
+                # impulse is small (the pair already held) still stops the slip that other
+                # pairs' impulses gave it, as far as the pair's whole normal impulse allows.
+                # Cut sweep by sweep, it could not (docs/theory.md §5.1; segment contact's
+                # passes do the same, contact.segment_contact)
+                o = 3 * ((dj + bj) * wide + di + bi)
+                had = (summed[n, o], summed[n, o + 1], summed[n, o + 2])
+                s_m = share * m_nk
+                tot, _slid = coulomb_cone((had[0] + s_m * (v[0, km] - v[0, n]),
+                                           had[1] + s_m * (v[1, km] - v[1, n]),
+                                           had[2] + s_m * (v[2, km] - v[2, n])), nh, law, 0)
+                j = (tot[0] - had[0], tot[1] - had[1], tot[2] - had[2])
+                summed[n, o] = tot[0]
+                summed[n, o + 1] = tot[1]
+                summed[n, o + 2] = tot[2]
                 lift = share * m_nk * (gap - g)
                 for c in range(3):
-                    units = _units(share * j[c], qi)
+                    units = _units(j[c], qi)
                     acc[0, c, n] += units
                     acc[0, c, km] -= units
                     if not place:
@@ -276,6 +308,32 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, pen
                         acc[1, c, n] += units
                     if move_k:
                         acc[1, c, km] -= units
+
+
+@njit(cache=True, _nrt=False)
+def _move_sums(summed, n, was, grid, shares):
+    """Node n's summed impulses (ply_contact's ply_sum row, by box position) moved from the box
+    around master grid offset `was` (its first node's) to the box around (ci, cj), grid = (ci,
+    cj, nx, bi, bj): each pair keeps its sum, a pair new to the box starts from none (shares'
+    rows 2–4: scratch)."""
+    ci, cj, mnx, bi, bj = grid
+    wide = 2 * bi + 1
+    count = (2 * bj + 1) * wide
+    for b in range(count):
+        for c in range(3):
+            shares[2 + c, b] = summed[n, 3 * b + c]
+    oi = was % mnx
+    oj = was // mnx
+    for dj in range(-bj, bj + 1):
+        for di in range(-bi, bi + 1):
+            o = 3 * ((dj + bj) * wide + di + bi)
+            # the same master node's position in the old box
+            ei = ci + di - oi
+            ej = cj + dj - oj
+            inside = -bi <= ei <= bi and -bj <= ej <= bj
+            b = (ej + bj) * wide + ei + bi
+            for c in range(3):
+                summed[n, o + c] = shares[2 + c, b] if inside else 0.0
 
 
 @njit(cache=True, inline="always")
@@ -354,12 +412,13 @@ tests/test_plies.py (400 m/s), a node of the second ply came within the projecti
 
 @njit(cache=True)
 def _shares_buffer(law, plies):
-    """_pass's scratch for the shares and gaps of a node's box of master nodes: (2, the
-    largest box of any ply)."""
+    """_pass's scratch for the shares and gaps of a node's box of master nodes (rows 0, 1) and
+    its summed impulses while their box moves (rows 2–4, _move_sums): (5, the largest box of
+    any ply)."""
     box = 1
     for p in range(plies):
         box = max(box, (2 * law.ply_box[p, 0] + 1) * (2 * law.ply_box[p, 1] + 1))
-    return np.empty((2, box))
+    return np.empty((5, box))
 
 
 @njit(cache=True)
@@ -379,12 +438,15 @@ def _all_pairs(phys, x, v, nrm, acc, phi_dt, v_start, near):
     memo = np.empty((1, 1))  # the φ-scheme's passes place: no sweeps of impulses alone
     stamp = np.empty(1, dtype=np.int64)
     none = np.int64(0)  # (not a literal: the type ply_contact's epoch has)
+    sums = (memo, stamp, stamp)  # and its forces sum no impulses
     for p in range(plies - 1):
         law_p = (law.ply_stiffness[p], phi_dt, v_start, np.empty(0), True)
-        _pass(phys, p, p + 1, -1.0, x, v, nrm, acc, (law.ply_guess[0], near, memo, stamp, none),
-              shares, (region[p], every), law_p)
-        _pass(phys, p + 1, p, 1.0, x, v, nrm, acc, (law.ply_guess[1], near, memo, stamp, none),
-              shares, (region[p + 1], every), law_p)
+        _pass(phys, p, p + 1, -1.0, x, v, nrm, acc,
+              (law.ply_guess[0], near, memo, stamp, none, sums), shares, (region[p], every),
+              law_p)
+        _pass(phys, p + 1, p, 1.0, x, v, nrm, acc,
+              (law.ply_guess[1], near, memo, stamp, none, sums), shares, (region[p + 1], every),
+              law_p)
 
 
 @njit(cache=True)
@@ -658,13 +720,15 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
             law_p = (0.0, 0.0, v, driven, bool(placing))
             _pass(phys, p, p + 1, -1.0, x, v, nrm, acc,
                   (law.ply_guess[0], work.ply_near[0], work.ply_memo[0], work.ply_stamp[0],
-                   epoch), shares, (region[p], box), law_p)
+                   epoch, (work.ply_sum[0], work.ply_sum_at[0], work.ply_sum_stamp[0])),
+                  shares, (region[p], box), law_p)
             if sweep > 0:  # the other way round: ply p is the slave
                 for c in range(4):
                     box[1 + c], box[5 + c] = box[5 + c], box[1 + c]
             _pass(phys, p + 1, p, 1.0, x, v, nrm, acc,
                   (law.ply_guess[1], work.ply_near[1], work.ply_memo[1], work.ply_stamp[1],
-                   epoch), shares, (region[p + 1], box), law_p)
+                   epoch, (work.ply_sum[1], work.ply_sum_at[1], work.ply_sum_stamp[1])),
+                  shares, (region[p + 1], box), law_p)
             d_lost, d_placed, d_moved, d_sped = _apply(
                 phys, sin, x, v, acc, lag, (nodes.ply_nodes[p], nodes.ply_nodes[p + 2]),
                 work.flag, work.node_field, (hot[plies:], p, tol, vtol, driven))

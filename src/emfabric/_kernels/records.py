@@ -546,9 +546,9 @@ class Work(NamedTuple):
     ply_normals: np.ndarray
     """Every ply's surface normal at its nodes (plies._normals), (3, node_count)."""
     ply_near: np.ndarray
-    """Central differences' ply contact: each node's nearest node of the ply below (row 0) and
-    above (row 1) as the step's first sweep found it (plies._pass), (2, node_count) int64;
-    (2, 1) for one ply."""
+    """Central differences' ply contact: each node's nearest node of the ply above (row 0) and
+    below (row 1), as Contact.ply_guess's rows, as the step's first sweep found it
+    (plies._pass), (2, node_count) int64; (2, 1) for one ply."""
     frame: np.ndarray
     """The fabric diagnostics' frame, (2, 3): the body centre at the end of the step (zeros
     without a body) and the flight direction (set by the integrator)."""
@@ -558,7 +558,7 @@ class Work(NamedTuple):
     ply_memo: np.ndarray
     """Central differences' ply contact, for the sweeps of impulses alone (whose positions do
     not change): each node's shares w and gaps g of the master nodes around it, their total and
-    whether one acts, as plies._pass found them, against the ply below (0) and above (1),
+    whether one acts, as plies._pass found them, against the ply above (0) and below (1),
     (2, node_count, 2·box + 2) for the largest box of master nodes; (2, 1, 1) for one ply.
     Kept for every node: under pack-field's sphere those sweeps meet all of them within the
     first 100 µs (all the rows of its 4 plies' nodes in one step)."""
@@ -567,6 +567,18 @@ class Work(NamedTuple):
     ply_memo, −1 for none, (2, node_count) int64."""
     ply_epoch: np.ndarray
     """ply_contact's call count, (1,) int64."""
+    ply_sum: np.ndarray
+    """Central differences' ply contact: the impulse each pair of a node and a master node
+    has had so far in the step's sweeps, by the master node's position in the node's box
+    (3 components each), against the ply above (0) and below (1), (2, node_count, 3·box) for
+    the largest box; (2, 1, 1) for one ply. The sweeps cut this sum to the Coulomb cone
+    (plies._pass)."""
+    ply_sum_at: np.ndarray
+    """The master node each node's ply_sum box is centred on (its nearest when the sum was
+    last written), (2, node_count) int64."""
+    ply_sum_stamp: np.ndarray
+    """The ply_contact call (ply_epoch) whose sweeps wrote each node's ply_sum, −1 for none,
+    (2, node_count) int64."""
 
 
 def ply_box_size(ply_box: np.ndarray) -> int:
@@ -607,8 +619,8 @@ def make_work(node_count: int, row_count: int, seg_total: int, seg_count: int = 
     segments; seg_count: the segments segment contact may touch (0 without segment contact:
     its arrays are then one element long); plies: 1 leaves ply contact's arrays one node long;
     ply_box: the most master nodes a node meets in ply contact (Contact.ply_box's largest
-    (2 i + 1)(2 j + 1), ply_box_size), which sizes ply_memo: central differences' (the
-    φ-scheme's passes keep no memo, and leave it at 1)."""
+    (2 i + 1)(2 j + 1), ply_box_size), which sizes ply_memo and ply_sum: central
+    differences' (the φ-scheme's passes keep neither, and leave it at 1)."""
     n = node_count
     ny = row_count
     nmax = n + seg_count
@@ -632,4 +644,7 @@ def make_work(node_count: int, row_count: int, seg_total: int, seg_count: int = 
                 np.zeros(DIAG_COUNT),
                 np.zeros((2, n if plies > 1 else 1, 2 * ply_box + 2 if plies > 1 else 1)),
                 np.full((2, n if plies > 1 else 1), -1, dtype=np.int64),
-                np.zeros(1, dtype=np.int64))
+                np.zeros(1, dtype=np.int64),
+                np.zeros((2, n if plies > 1 else 1, 3 * ply_box if plies > 1 else 1)),
+                np.full((2, n if plies > 1 else 1), -1, dtype=np.int64),
+                np.full((2, n if plies > 1 else 1), -1, dtype=np.int64))
