@@ -462,13 +462,13 @@ def test_ply_friction_obeys_coulombs_law_over_the_step_sweeps():
     stuck to the top one (v = (0, 0, −V), closed form): the impulse across their interface,
     m(0, 0, −V) less what the bottom ply gave the middle one, leans from the top ply's normal by
     0.27–0.28 in tangent (the pairs' summed impulses, records.Work.ply_sum), inside the static
-    cone. The bottom ply's friction
-    reaches the middle one sweep by sweep, each piece with μ_d of its own normal impulse about
-    the bottom ply's normal: about the tilted normal above, a piece leans (μ_d + tan θ)/(1 −
-    μ_d tan θ) = 0.59 > μ_s. Each sweep's impulse cut to the cone of its own normal impulse,
-    as before, slid every such piece, and a node of the middle ply kept 4.3 m/s of the bottom
-    ply's slip along x (4 % of V); with the step's summed impulse cut to the cone, the pair
-    sticks (docs/theory.md §5.1)."""
+    cone. The bottom ply's friction reaches the middle one sweep by sweep, each piece with μ_d
+    of its own normal impulse about the bottom ply's normal: about the tilted normal above, a
+    piece leans (μ_d + tan θ)/(1 − μ_d tan θ) = 0.59 > μ_s. Each sweep's impulse cut to the
+    cone of its own normal impulse, as before, slid every such piece, and a node of the middle
+    ply kept 4.3 m/s of the bottom ply's slip along x (4 % of V); with the step's summed
+    impulse cut to the cone, the pair sticks (docs/theory.md §5.1). The increments a sweep
+    applies keep exact action and reaction: the pack's momentum is exact."""
     from emfabric._kernels.plies import ply_contact
 
     size = 0.0005
@@ -487,9 +487,13 @@ def test_ply_friction_obeys_coulombs_law_over_the_step_sweeps():
     held = np.zeros(model.node_count)
     held[top] = 1.0
     v_top = v[:, top].copy()
+    m = float(model.nodes.mass[0])
+    p0 = m * v.sum(axis=1)
     ply_contact(integ.physics, state.arrays, x, v, integ.work, 1e-8, held)
     # stuck to the top ply's velocity before the sweeps (the held nodes take −ΣJ only after
     # them), within the sweeps' convergence (PLY_VELOCITY_TOLERANCE)
     np.testing.assert_allclose(v[:, mid], v_top, atol=0.01 * speed)
-    # and the bottom ply still slides under it, slowed
+    # and the bottom ply still slides under it, slowed by friction
     assert np.all(v[0, low] > v[0, mid] + speed)
+    assert np.all(v[0, low] < 2.0 * speed)
+    np.testing.assert_allclose(m * v.sum(axis=1), p0, atol=1e-12 * m * speed)
