@@ -293,6 +293,65 @@ def test_friction_work_of_a_sheet_struck_on_a_face(pull):
     assert abs(float(h.energy_balance_error[-1])) < 1e-9 * float(h.work_field[-1])
 
 
+@pytest.mark.parametrize("radius", [0.004, 0.0012])
+@pytest.mark.parametrize("held", [False, True])
+def test_a_slip_stops_when_kinetic_friction_has_taken_it(radius, held):
+    """A rigid free 2 × 2 sheet (2 mm across, all nodes alike) sliding along y at v₀ = 10 m/s
+    is pulled by E_z across a 2 µm gap onto the flat end face of a heavy cylinder at rest:
+    on its four nodes (radius 4 mm), or, with radius 1.2 mm, on its four yarn segments only
+    (their midpoints 1 mm from the axis, the nodes 1.41 mm). μ_s = 1, μ_d = 0.2. Closed form:
+    the impact slides (v₀ is 1.6 times the normal speed it arrives with), and from then on
+    friction's impulse is μ_d times the face's whole normal impulse q E_z t per node, so the
+    slip is v(t) = v₀ − a t with a = μ_d q E_z/m, down to 0 at t* = m v₀/(μ_d q E_z), and then
+    it stays stuck. Deciding each step's stick with μ_s, as the paper's law does, stopped every
+    slip slower than (μ_s q E_z/m) Δt at once: here 3.1 steps early with 0.30 m/s (4.6 a Δt)
+    of slip left. A contact that slid in the previous step now sticks only where μ_d times
+    its normal impulse stops it (contact.KINETIC): it stops within the step that holds t*.
+    held: at rest along y, with E_y = 0.6 E_z: the impact sticks (0.6 < μ_s) and static
+    friction holds the sheet for good, though the pull is three times what kinetic friction
+    could hold (a contact at rest is decided with μ_s)."""
+    gap, ez, v0 = 2e-6, 1.2, 10.0
+    mu_s, mu_d = 1.0, 0.2
+    sc = make(**{"fabric.nodes": [2, 2], "fabric.size": [0.002, 0.002],
+                 "fabric.rescale": False, "fabric.edges": "free", "fabric.damage.rate": 0.0,
+                 "fabric.material.modulus_cv": 0.0, "field.B": [0, 0, 0],
+                 "field.E": [0.0, 0.6 * ez if held else 0.0, ez],
+                 "fabric.velocity": [0.0, 0.0 if held else v0, 0.0],
+                 "contact.static_friction": mu_s, "contact.dynamic_friction": mu_d,
+                 "projectile.shape": "cylinder", "projectile.radius": radius,
+                 "projectile.length": 0.02, "projectile.mass": 5.0,
+                 "projectile.axis": [0, 0, -1], "projectile.position": [0.0, 0.0, 0.01 + gap],
+                 "projectile.velocity": [0.0, 0.0, 0.0], "solver.end_time": 10e-6, **CD})
+    model = build_model(sc)
+    q, m = float(model.nodes.charge[0]), float(model.nodes.mass[0])
+    h = run(sc).history
+    assert int(h.contact_nodes[-1]) == 4
+    assert int(h.contact_segments[-1]) == (4 if radius < 0.002 else 0)
+    t, dt = h.time.values, float(np.median(h.dt))
+    slip = h.fabric_momentum.values[:, 1] / (4 * m) - h.projectile_velocity.values[:, 1]
+    tc = math.sqrt(2 * gap * m / (q * ez))
+    if held:
+        # stuck: the velocity at a whole step holds only the half kick of the pull, q E_y Δt/2m
+        # (sliding, it would gain (0.6 − μ_d) q E_z/m × 9 µs = 34 m/s)
+        assert np.abs(slip[t > tc + 2 * dt]).max() < 1.01 * 0.6 * q * ez * dt / (2 * m)
+        return
+    a = mu_d * q * ez / m
+    t_stop = m * v0 / (mu_d * q * ez)
+    assert v0 > mu_s * q * ez * tc / m  # the impact slides
+    moving = np.flatnonzero(np.abs(slip) > 1e-3)
+    last = int(moving.max())
+    # it stops in the step that holds t*, from a slip kinetic friction takes within a step,
+    # and stays stuck
+    assert t[last] < t_stop <= t[last + 1]
+    assert 0.0 < slip[last] < a * dt
+    assert np.abs(slip[last + 1:]).max() < 1e-5
+    # and until then it slides at v₀ − a t (central differences' velocities at whole steps
+    # lag the friction's half-step impulse by a Δt/2)
+    sliding = (t > tc + 2 * dt) & (t < t_stop - 2 * dt)
+    assert sliding.sum() > 100
+    np.testing.assert_allclose(slip[sliding], v0 - a * t[sliding], rtol=0, atol=0.6 * a * dt)
+
+
 SMALL = {"fabric.nodes": [12, 12], "solver.end_time": 120e-6, "output.snapshot_interval": 5e-6,
          "projectile.gap": 0.0, **CD}
 

@@ -120,9 +120,11 @@ def test_sigkill_then_resume(uninterrupted, tmp_path):
 
 def test_checkpoint_round_trips_every_state_field(tmp_path):
     """Every field of the State comes back exactly (the checkpoint is the whole State)."""
-    # a brittle law with strain averaging: the averaged stretch² (seg_strain) is a real array
+    # a brittle law with strain averaging: the averaged stretch² (seg_strain) is a real array;
+    # segment contact under central differences: so are the segments' contact modes
     model = build_model(load_scenario("demo-small", {
-        **SMALL, "fabric.material.name": "kevlar-km2", "fabric.damage.law": "brittle"}))
+        **SMALL, "fabric.material.name": "kevlar-km2", "fabric.damage.law": "brittle",
+        "contact.segments": True, "solver.integrator": "central-difference"}))
     rng = np.random.default_rng(3)
     shapes = initial_state(model)  # every field's shape and type, from a real State
     values = {}
@@ -137,7 +139,7 @@ def test_checkpoint_round_trips_every_state_field(tmp_path):
     state = State(**values)
     arrays = [f.name for f in dataclasses.fields(State) if isinstance(values[f.name], np.ndarray)]
     for name in ("node_x", "node_v", "node_f", "seg_alpha", "body", "energy", "node_e",
-                 "node_contact", "node_fv", "seg_strain", "contact_force"):
+                 "node_contact", "node_fv", "seg_strain", "seg_contact", "contact_force"):
         assert name in arrays and values[name].size > 0, name
     pos = RunPosition(17, 4, 2.5e-5, 12.25)
     write_checkpoint(tmp_path / CHECKPOINT, model, state, pos)

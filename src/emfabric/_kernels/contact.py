@@ -36,6 +36,12 @@ from emfabric._kernels.vec3 import cross, distance_sq, norm
 STICK, SLIDE = 2, 3
 """work.flag of a node in contact at the latest iterate: sticking, sliding (0: no candidate,
 1: candidate not in contact)."""
+KINETIC = 4
+"""coulomb_cone's mode for a contact that slid in the previous step (central differences): it
+sticks only where μ_d times its normal impulse stops it. Static friction holds a contact at
+rest; a sliding one stops when kinetic friction has taken its slip, and the test with μ_s
+would stop, in every step, contacts that slide slower than (μ_s − μ_d) F_n Δt/m (docs/theory.md
+§5.2, "Kinetic friction until the slip stops")."""
 
 FREEZE_AFTER = 3
 """Iterations of an attempt after which each contact keeps the stick or slide decision of the
@@ -47,9 +53,10 @@ def contact_impulse(m, v_node, v_surface, n, law, mode):
     """Impulse J [N s] on a node of mass m at velocity v_node touching a surface point moving at
     v_surface, with outward normal n, under the Contact record `law`, and whether it slides.
 
-    mode 0 decides stick or slide by the Coulomb check; STICK or SLIDE imposes that decision
-    (an attempt's late iterates keep the previous iterate's: the switch is a jump in J, and a
-    fixed-point iteration across a jump cycles instead of converging)."""
+    mode 0 decides stick or slide by the Coulomb check; KINETIC by the same check with μ_d in
+    place of μ_s (a contact that slid in the previous step); STICK or SLIDE imposes that
+    decision (an attempt's late iterates keep the previous iterate's: the switch is a jump in
+    J, and a fixed-point iteration across a jump cycles instead of converging)."""
     return coulomb_cone((m * (v_surface[0] - v_node[0]), m * (v_surface[1] - v_node[1]),
                          m * (v_surface[2] - v_node[2])), n, law, mode)
 
@@ -58,9 +65,9 @@ def contact_impulse(m, v_node, v_surface, n, law, mode):
 def coulomb_cone(j, n, law, mode):
     """The impulse j that would make a contact of outward normal n stick, cut to what the
     contact law gives, and whether it slides: nothing where its normal part would pull; j
-    itself where its tangential part is at most μ_s times the normal part (stick, eq. 4.8);
-    else the normal part and μ_d times it along the tangential part (slide, eq. 4.11). mode as
-    contact_impulse's."""
+    itself where its tangential part is at most μ_s times the normal part (stick, eq. 4.8; μ_d
+    times it with mode KINETIC); else the normal part and μ_d times it along the tangential
+    part (slide, eq. 4.11). mode as contact_impulse's."""
     jx, jy, jz = j
     jn = jx * n[0] + jy * n[1] + jz * n[2]
     if jn > 0.0:
@@ -68,8 +75,14 @@ def coulomb_cone(j, n, law, mode):
         ty = jy - jn * n[1]
         tz = jz - jn * n[2]
         jt = math.sqrt(tx * tx + ty * ty + tz * tz)
-        # Coulomb check, eq. 4.8; slide with μ_d along the sliding velocity, eq. 4.11
-        slide = jt > law.static_friction * jn if mode == 0 else mode == SLIDE
+        # Coulomb check, eq. 4.8 (with μ_d for a contact that was sliding: KINETIC); slide with
+        # μ_d along the sliding velocity, eq. 4.11
+        if mode == 0:
+            slide = jt > law.static_friction * jn
+        elif mode == KINETIC:
+            slide = jt > law.dynamic_friction * jn
+        else:
+            slide = mode == SLIDE
         if slide and jt > 0.0:
             scale = law.dynamic_friction * jn / jt
             return (jn * n[0] + scale * tx, jn * n[1] + scale * ty, jn * n[2] + scale * tz), True
@@ -357,7 +370,7 @@ def _drift_segment_ends(inv_mass, first, nc, x1, work, lag):
 
 
 @njit(cache=True)
-def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, lag):
+def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, lag, was, now):
     """Resolve contact of the candidate segments against the body, after node contact.
 
     A segment presses on the body at its point P = w_a x_a + w_b x_b nearest the body's axis
@@ -398,6 +411,11 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, la
     that back as well, and the friction it needs grows with it: at the default step the
     ogive's segments stuck where converged runs slide (docs/theory.md §5.2). The φ-scheme
     passes lag = 0 (no move: its bits are those of the paper's scheme as shipped).
+
+    was, now: each segment's contact mode at the start and the end of the step (0 none,
+    STICK, SLIDE; StateArrays.seg_contact), by segment; a segment in contact that slid in the
+    previous step is cut with mode KINETIC. now must hold zeros; each contact's last cut
+    writes it. (0,)-long arrays keep no modes (the φ-scheme: the paper's law, μ_s always).
     Appends the contacts after the first nc; returns the new count.
     """
     inv_mass = nodes.inv_mass
@@ -517,10 +535,14 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, la
                 # to the Coulomb cone as a whole: a pass whose own normal impulse is small (the
                 # point already held) still stops the slip its neighbours' impulses gave it,
                 # as far as the contact's whole normal impulse allows
-                total_j, _slid = coulomb_cone(
+                kinetic = was.shape[0] > 0 and was[s] == SLIDE
+                total_j, slid = coulomb_cone(
                     (c_imp[0, kc] + scale * tmp[0, idx], c_imp[1, kc] + scale * tmp[1, idx],
                      c_imp[2, kc] + scale * tmp[2, idx]),
-                    (c_nrm[0, kc], c_nrm[1, kc], c_nrm[2, kc]), law, 0)
+                    (c_nrm[0, kc], c_nrm[1, kc], c_nrm[2, kc]), law, KINETIC if kinetic else 0)
+                if now.shape[0] > 0:
+                    held = total_j[0] != 0.0 or total_j[1] != 0.0 or total_j[2] != 0.0
+                    now[s] = SLIDE if slid else (STICK if held else 0.0)
                 dj = (total_j[0] - c_imp[0, kc], total_j[1] - c_imp[1, kc],
                       total_j[2] - c_imp[2, kc])
                 for c in range(3):

@@ -40,6 +40,7 @@ from numba import njit, uint64
 
 from emfabric._kernels.body import BODY_ITERATION_LIMIT, field_wrench
 from emfabric._kernels.contact import (
+    KINETIC,
     SLIDE,
     STICK,
     contact_impulse,
@@ -210,7 +211,9 @@ def _node_contact(phys, sin, sout, work, ncand, dt):
         wr = cross(omega, r)
         vs = (vel[0] + wr[0], vel[1] + wr[1], vel[2] + wr[2])
         m = mass[n]
-        j, slid = contact_impulse(m, (v1[0, n], v1[1, n], v1[2, n]), vs, nh, law, 0)
+        # a node that slid in the previous step stops only where kinetic friction stops it
+        j, slid = contact_impulse(m, (v1[0, n], v1[1, n], v1[2, n]), vs, nh, law,
+                                  KINETIC if was[3, n] == SLIDE else 0)
         if j[0] == 0.0 and j[1] == 0.0 and j[2] == 0.0:
             # separating: let go; a node inside is still put on the surface where it is (the
             # move carries no momentum)
@@ -445,8 +448,11 @@ def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol
                 work.xbuf[c, n] = sout.x[c, n]
         nc = _node_contact(phys, sin, sout, work, ncand, dt)
         if segs is not None:
+            seg_modes = sout.seg_contact
+            for s in range(seg_modes.shape[0]):
+                seg_modes[s] = 0.0
             nc = segment_contact(nodes, phys.yarns, body, phys.contact, b_out, nseg, nc,
-                                 sout.x, sout.v, work, dt)
+                                 sout.x, sout.v, work, dt, sin.seg_contact, seg_modes)
         reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, reaction[0], reaction[1])
     # energy of the contacts (velocities before and after the impulses, at the half step)
     d_cont = 0.0

@@ -430,6 +430,10 @@ class StateArrays(NamedTuple):
     strain: np.ndarray = np.zeros(0)
     """Each segment's averaged stretch² ū² (Yarns.averaging_rate), (seg_count,); (0,) where
     brittle yarns break on the instantaneous stretch or the law is eq. 2.6."""
+    seg_contact: np.ndarray = np.zeros(0)
+    """Each segment's contact mode with the body at the state's time (central differences
+    with segment contact: 0 none, contact.STICK, contact.SLIDE), (seg_count,); (0,) for the
+    φ-scheme or without segment contact."""
 
 
 # the fabric diagnostics of a state (diagnostics.fabric_diagnostics), in this order: kinetic

@@ -232,7 +232,8 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, plies, segs, t,
             # ply contact at the iterate, with its velocities (the start's at the first)
             ply_forces(phys, prev, v0 if k == 1 else v1, v0, work, work.ply_force, phi * dt)
         fabric_iterate(phys, prev, sin, StateArrays(cur, v1, f1, alpha_t, b_out, sout.e,
-                                                    sout.contact, sout.fv, sout.strain), work,
+                                                    sout.contact, sout.fv, sout.strain,
+                                                    sout.seg_contact), work,
                        rowbuf, threads, t1, phi, dt)
         if plies is not None:
             ply_update(phys, work, cur, v1, f1, prev, x0, phi, dt)
@@ -243,7 +244,7 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, plies, segs, t,
                               phi if phys.contact.follow else 0.0, dt, k > FREEZE_AFTER)
             if segs is not None:
                 nc = segment_contact(nodes, phys.yarns, body, phys.contact, b_out, nseg, nc,
-                                     cur, v1, work, 0.0)
+                                     cur, v1, work, 0.0, sin.seg_contact, sout.seg_contact)
             candidate_errors(nodes, ncand, work.cand, x0, prev, cur, row_sums)
             reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, imp_force, imp_moment)
             num_b, den_b, body_ok = body_update(body, phys.field, b_in, b_out, t1, phi, dt,

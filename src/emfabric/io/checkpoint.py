@@ -26,16 +26,17 @@ from emfabric.sim.model import Model
 from emfabric.sim.state import State
 
 CHECKPOINT = "checkpoint.nc"
-FORMAT = 5  # 2: the State holds node_e; 3: node_contact; 4: node_fv, dissipation_viscous;
-# 5: seg_strain
+FORMAT = 6  # 2: the State holds node_e; 3: node_contact; 4: node_fv, dissipation_viscous;
+# 5: seg_strain; 6: seg_contact
 _ADDED: dict[str, int] = {}
-"""State fields added since format 5 was written, with the value a checkpoint without them
+"""State fields added since format 6 was written, with the value a checkpoint without them
 reads as (a field that describes the step that wrote the checkpoint, which the resumed run
 does not record again, as contact_segments was within format 3)."""
 _DIMS = {"node_x": ("xyz", "node"), "node_v": ("xyz", "node"), "node_f": ("xyz", "node"),
          "node_e": ("xyz", "node"), "node_contact": ("contact_row", "node"),
          "node_fv": ("xyz", "viscous_node"),
          "seg_alpha": ("segment",), "seg_strain": ("averaged_segment",),
+         "seg_contact": ("contact_segment",),
          "body": ("body_row", "xyz"), "energy": ("energy_term",),
          "contact_force": ("xyz",)}
 

@@ -44,7 +44,7 @@ from emfabric.sim.builder import build_model
 from emfabric.sim.diagnostics import check_plausible, left_for_good, limits, measure
 from emfabric.sim.model import Model
 from emfabric.sim.plausibility import log_warnings
-from emfabric.sim.state import State, initial_state
+from emfabric.sim.state import State, initial_state, segment_modes
 
 ProgressFn = Callable[[State, StepInfo], None]
 log = logging.getLogger(__name__)
@@ -141,7 +141,8 @@ def _resume(out: Path, scenario: Scenario | None, progress: ProgressFn | None,
     model = build_model(scenario if extends else stored)
     if (state.node_x.shape != (3, model.node_count) or state.seg_alpha.shape
             != (model.seg_count,) or state.seg_strain.shape
-            != model.physics.yarns.averaging_rate.shape):
+            != model.physics.yarns.averaging_rate.shape
+            or state.seg_contact.shape != (segment_modes(model),)):
         raise CheckpointError(f"{path}: its arrays do not fit the scenario's grid")
     history = out / "history.nc"
     status = history_status(history)

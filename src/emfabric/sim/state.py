@@ -62,6 +62,10 @@ class State:
     seg_strain: np.ndarray = field(default_factory=lambda: np.zeros(0))
     """Each segment's averaged stretch² (brittle yarns with fabric.damage.strain_averaging:
     records.Yarns.averaging_rate), (seg_count,); (0,) where it is not kept."""
+    seg_contact: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    """Each segment's contact mode with the projectile at t (0 none, contact.STICK,
+    contact.SLIDE), (seg_count,): central differences with contact.segments, whose segments
+    that slid stop only where kinetic friction stops them; (0,) otherwise."""
     steps: int = 0
     """Accepted steps so far."""
     rejected: int = 0
@@ -93,7 +97,8 @@ class State:
     def arrays(self) -> StateArrays:
         """The arrays a step kernel reads or writes, as a named record."""
         return StateArrays(self.node_x, self.node_v, self.node_f, self.seg_alpha, self.body,
-                           self.node_e, self.node_contact, self.node_fv, self.seg_strain)
+                           self.node_e, self.node_contact, self.node_fv, self.seg_strain,
+                           self.seg_contact)
 
     @property
     def body_x(self) -> np.ndarray:
@@ -145,6 +150,7 @@ def blank_state(model: Model) -> State:
         node_contact=np.zeros((4, n)),
         node_fv=np.zeros((3, n if m.physics.yarns.damping.size else 0)),
         seg_strain=np.zeros(0),
+        seg_contact=np.zeros(segment_modes(m)),
     )
     if m.physics.yarns.averaging_rate.size:
         # the average starts at the initial stretch² (a slack yarn's at 1: unstrained)
@@ -156,6 +162,13 @@ def blank_state(model: Model) -> State:
     st.body[BODY_W] = m.body_w0
     st.body[BODY_R0:BODY_R0 + 3] = np.eye(3)
     return st
+
+
+def segment_modes(model: Model) -> int:
+    """The length of State.seg_contact: the segment count where central differences resolve
+    segment contact (they keep each segment's stick or slide), else 0."""
+    keep = model.physics.contact.segments and model.options.integrator == "central-difference"
+    return model.seg_count if keep else 0
 
 
 def update_forces(model: Model, state: State) -> None:
@@ -173,10 +186,10 @@ def update_forces(model: Model, state: State) -> None:
     fill_node_fields(m.field, state.node_x, state.node_v, 0.0, state.t, work.node_field)
     start = StateArrays(state.node_x, state.node_v, np.zeros_like(state.node_f),
                         state.seg_alpha, state.body, state.node_e, state.node_contact,
-                        np.zeros_like(state.node_fv), state.seg_strain)
+                        np.zeros_like(state.node_fv), state.seg_strain, state.seg_contact)
     out = StateArrays(scratch.node_x, scratch.node_v, state.node_f, scratch.seg_alpha,
                       scratch.body, state.node_e, scratch.node_contact, state.node_fv,
-                      scratch.seg_strain)
+                      scratch.seg_strain, scratch.seg_contact)
     # kick_rows's one row block, called from here: kick_rows itself is inlined into the step
     # kernel and never compiled on its own in a run (its docstring says why); the arguments
     # have the types kick_rows gives _kick_block, so this compiles nothing the step kernel
