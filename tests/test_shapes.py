@@ -387,8 +387,8 @@ def test_shared_segment_contacts_are_resolved_together(depth_radius, lag):
     x, v = a.x.copy(), np.zeros_like(a.v)
     _ncand, nseg = find_segment_candidates(phys.yarns, a.alpha, phys.material.broken_below, x,
                                            phys.nodes.inv_mass, body[BODY_X], 0.03, work, 0)
-    nc = segment_contact(phys.nodes, phys.yarns, phys.body, phys.contact, body, nseg, 0, x, v,
-                         work, lag, a.seg_contact, np.zeros_like(a.seg_contact))
+    nc = segment_contact(phys, body, nseg, 0, x, v, work, lag, a.seg_contact,
+                         np.zeros_like(a.seg_contact))
     assert nc == 4
     rot = body[BODY_R0:BODY_R0 + 3]
     mu_d = phys.contact.dynamic_friction

@@ -370,8 +370,9 @@ def _drift_segment_ends(inv_mass, first, nc, x1, work, lag):
 
 
 @njit(cache=True)
-def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, lag, was, now):
-    """Resolve contact of the candidate segments against the body, after node contact.
+def segment_contact(phys, b_state, nseg, nc, x1, v1, work, lag, was, now):
+    """Resolve contact of the candidate segments (phys: the Physics record) against the body,
+    after node contact.
 
     A segment presses on the body at its point P = w_a x_a + w_b x_b nearest the body's axis
     (shapes.pressing_point). If P is inside, it is moved to the closest surface point and given
@@ -418,8 +419,9 @@ def segment_contact(nodes, yarns, body, law, b_state, nseg, nc, x1, v1, work, la
     writes it. (0,)-long arrays keep no modes (the φ-scheme: the paper's law, μ_s always).
     Appends the contacts after the first nc; returns the new count.
     """
-    inv_mass = nodes.inv_mass
-    ends = yarns.ends
+    body, law = phys.body, phys.contact
+    inv_mass = phys.nodes.inv_mass
+    ends = phys.yarns.ends
     seg_cand, share, acc = work.seg_cand, work.share, work.acc
     active, slot, tmp, seg_list = work.seg_active, work.seg_slot, work.seg_tmp, work.seg_list
     c_node, c_node2, c_w = work.c_node, work.c_node2, work.c_w

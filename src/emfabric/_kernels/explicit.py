@@ -451,8 +451,8 @@ def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol
             seg_modes = sout.seg_contact
             for s in range(seg_modes.shape[0]):
                 seg_modes[s] = 0.0
-            nc = segment_contact(nodes, phys.yarns, body, phys.contact, b_out, nseg, nc,
-                                 sout.x, sout.v, work, dt, sin.seg_contact, seg_modes)
+            nc = segment_contact(phys, b_out, nseg, nc, sout.x, sout.v, work, dt,
+                                 sin.seg_contact, seg_modes)
         reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, reaction[0], reaction[1])
     # energy of the contacts (velocities before and after the impulses, at the half step)
     d_cont = 0.0

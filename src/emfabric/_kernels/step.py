@@ -243,8 +243,8 @@ def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, plies, segs, t,
             nc = node_contact(nodes, body, phys.contact, b_out, ncand, cur, v1, work,
                               phi if phys.contact.follow else 0.0, dt, k > FREEZE_AFTER)
             if segs is not None:
-                nc = segment_contact(nodes, phys.yarns, body, phys.contact, b_out, nseg, nc,
-                                     cur, v1, work, 0.0, sin.seg_contact, sout.seg_contact)
+                nc = segment_contact(phys, b_out, nseg, nc, cur, v1, work, 0.0,
+                                     sin.seg_contact, sout.seg_contact)
             candidate_errors(nodes, ncand, work.cand, x0, prev, cur, row_sums)
             reaction_sums(nc, work.c_imp, work.c_arm, work.sum_buf, imp_force, imp_moment)
             num_b, den_b, body_ok = body_update(body, phys.field, b_in, b_out, t1, phi, dt,

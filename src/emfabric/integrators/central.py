@@ -105,8 +105,7 @@ class CentralDifference(IntegratorBase):
         if plies is not None:
             out.append((ply_contact, (phys, a, a.x, a.v, work, 0.0, a.contact[3])))
         if segs is not None:
-            out.append((segment_contact, (phys.nodes, phys.yarns, phys.body, phys.contact,
-                                          a.body, 0, 0, a.x, a.v, work, 0.0,
+            out.append((segment_contact, (phys, a.body, 0, 0, a.x, a.v, work, 0.0,
                                           a.seg_contact, a.seg_contact)))
         out += [(stable_step, (phys, a.x, a.alpha, self.scratch)),
                 (travel_step, (phys, a.x, a.v, a.body))]

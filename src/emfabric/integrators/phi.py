@@ -131,8 +131,7 @@ class Integrator(IntegratorBase):
         out.append((node_contact, (phys.nodes, phys.body, phys.contact, a.body, 0, a.x, a.v,
                                    work, phi, dt, False)))
         if segs is not None:
-            out.append((segment_contact, (phys.nodes, phys.yarns, phys.body, phys.contact,
-                                          a.body, 0, 0, a.x, a.v, work, 0.0,
+            out.append((segment_contact, (phys, a.body, 0, 0, a.x, a.v, work, 0.0,
                                           a.seg_contact, a.seg_contact)))
         out += [(body_update, (phys.body, phys.field, a.body, a.body, t, phi, dt, work.reaction,
                                work.body_scratch, self.solver.tolerance)),
