@@ -39,9 +39,9 @@ STICK, SLIDE = 2, 3
 KINETIC = 4
 """coulomb_cone's mode for a contact that slid in the previous step (central differences): it
 sticks only where μ_d times its normal impulse stops it. Static friction holds a contact at
-rest; a sliding one stops when kinetic friction has taken its slip, and the test with μ_s
-would stop, in every step, contacts that slide slower than (μ_s − μ_d) F_n Δt/m (docs/theory.md
-§5.2, "Kinetic friction until the slip stops")."""
+rest; a sliding one stops when kinetic friction has taken its slip. The test with μ_s would
+also stop a contact whose slip exceeds what kinetic friction takes in the step by up to
+(μ_s − μ_d) F_n Δt/m (docs/theory.md §5.2, "Kinetic friction until the slip stops")."""
 
 FREEZE_AFTER = 3
 """Iterations of an attempt after which each contact keeps the stick or slide decision of the
