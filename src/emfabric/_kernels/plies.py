@@ -605,8 +605,8 @@ the placements cycle at a sharp fold: a node of pack-field's second ply beside t
 axis was moved 1.6e-7 m back and forth every sweep (4e-4 of the contact distance, below
 PLY_TOLERANCE: the overlap it leaves is no larger), and the impulses, whose pairs came and
 went with it, changed by ~2 % of the first sweep's every sweep without end. Without
-placements they fall to ~3.5 % of it in 40 sweeps and slowly after (a node meets nine nodes
-of the other ply, each a pair: docs/theory.md §5.1); pack-field's ω_x at 100 µs with 8 / 32 /
+placements they fall to ~3.5 % of it in 40 sweeps and slowly after (the pack's thickness:
+docs/theory.md §5.1, "Where the sweeps converge slowly"); pack-field's ω_x at 100 µs with 8 / 32 /
 64 such sweeps: −461 / −457 / −453 rad/s, and with 2 / 4 / 8: −453 / −458 / −460 (worktree runs,
 the first three before the pair skip was removed); they made the whole pack-field run 3.9 × as
 long as with none, 1.6 × since the sweeps keep what does not change between them (their
