@@ -62,8 +62,18 @@ def test_input_errors_exit_2(tmp_path, done_run):
         "figure format": (["field", "demo-small", "--plot", tmp_path / "f.xyz"], ".png"),
         "resume without a checkpoint": (["run", "--resume", tmp_path / "empty"],
                                         "no checkpoint"),
+        # --out naming a file: the user's input, for a run and for each study (a study
+        # said "cannot write …: File exists", exit 1)
+        "run --out a file": (["run", "demo-small", "--out", tmp_path / "afile", *TINY],
+                             "afile is a file, not a folder"),
+        "sweep --out a file": (["sweep", tmp_path / "s.toml", "--out", tmp_path / "afile"],
+                               "afile is a file, not a folder"),
+        "ballistic-limit --out a file": (["ballistic-limit", "rupture", "--out",
+                                          tmp_path / "afile"], "afile is a file, not a folder"),
     }
     (tmp_path / "empty").mkdir()
+    (tmp_path / "afile").write_text("not a folder")
+    (tmp_path / "s.toml").write_text('base = "demo-small"\n[axes]\n"field.B" = [[0, 0, 0]]\n')
     for name, (args, needle) in cases.items():
         r = _cli(*args)
         assert r.returncode == 2, (name, r.stderr)

@@ -2,10 +2,16 @@
 mistake, a refusal for an output volume nobody wants."""
 
 import logging
+import tomllib
 
 import pytest
 
-from emfabric.config.scenario import ScenarioError, builtin_names, load_scenario
+from emfabric.config.scenario import (
+    ScenarioError,
+    builtin_names,
+    load_scenario,
+    scenario_from_dict,
+)
 from emfabric.sim.builder import build_model
 from emfabric.sim.sanity import output_volume, pre_run_warnings
 
@@ -40,6 +46,13 @@ from conftest import make
     # a charge the sphere (radius 0.02635 m) carries, half a metre from its centre
     ({"projectile.charges": [{"position": [0.5, 0.0, 0.0], "charge": 1e-6}]},
      "lies 0.5 m from the centre of mass, outside the projectile (it reaches 0.02635 m)"),
+    # a solver key the chosen integrator does not read (it ran without it, silently)
+    ({"solver.integrator": "central-difference", "solver.safety": 0.5},
+     "solver.safety = 0.5: read only by the φ-scheme"),
+    ({"solver.integrator": "phi", "solver.courant": 0.5},
+     "solver.courant = 0.5: read only by central differences"),
+    ({"solver.integrator": "central-difference", "solver.phi": 1.0, "solver.tolerance": 1e-4},
+     "solver.phi = 1.0, solver.tolerance = 0.0001: read only by the φ-scheme"),
 ])
 def test_typing_mistakes_are_warned_with_the_fix(overrides, expected, caplog):
     """Each mistake of the issue's new user runs (a warning, not an error) and says why and
@@ -70,6 +83,16 @@ def test_a_charge_on_the_surface_is_no_mistake():
 def test_the_builtin_scenarios_raise_no_warning():
     for name in builtin_names():
         assert pre_run_warnings(build_model(load_scenario(name))) == [], name
+
+
+def test_a_full_scenario_written_back_raises_no_solver_warning():
+    """A run's own scenario (a checkpoint's, a study case's) writes every key, the φ-scheme's
+    included: read back, its default values are no mistake."""
+    for over in ({}, {"solver.integrator": "phi"},
+                 {"solver.integrator": "phi", "solver.bulk_viscosity": 0.0}):
+        sc = make(**{"fabric.nodes": [21, 21], **over})
+        again = scenario_from_dict(tomllib.loads(sc.to_toml()), "<written back>")
+        assert pre_run_warnings(build_model(again)) == []
 
 
 def test_output_volume_is_refused_above_the_limit_unless_asked_for():

@@ -163,6 +163,20 @@ def test_unreachable_scheduler_fails_at_once(tmp_path):
     assert time.monotonic() - t0 < 60
 
 
+@pytest.mark.parametrize("address", ["notanaddress", "tcp://host:abc"])
+def test_a_malformed_scheduler_address_is_an_input_error(tmp_path, address):
+    """An address Dask cannot parse is the user's input: exit 2, naming --scheduler and the
+    form it takes, no traceback (it was a ValueError from dask.distributed, exit 1)."""
+    study = tmp_path / "s.toml"
+    study.write_text(STUDY)
+    res = subprocess.run([sys.executable, "-m", "emfabric", "sweep", str(study), "--out",
+                          str(tmp_path / "o"), "--scheduler", address],
+                         capture_output=True, text=True)
+    assert res.returncode == 2, res.stderr
+    assert f"--scheduler {address!r}: not a Dask scheduler address" in res.stderr
+    assert "tcp://HOST:PORT" in res.stderr and "Traceback" not in res.stderr
+
+
 def test_latin_hypercube_puts_one_sample_in_each_stratum(tmp_path):
     study = tmp_path / "lhs.toml"
     study.write_text('base = "demo-small"\n[lhs]\nsamples = 8\nseed = 3\n'
@@ -209,6 +223,18 @@ def test_study_file_errors_say_what(tmp_path):
          "axes.'projectile.mass' = 0.05: allowed: a list of values"),
         ('base = "demo-small"\n[axes]\n"projectile.mass" = []\n',
          "axes.'projectile.mass' is empty; allowed: a list of values"),
+        # a value twice would be one case under two coordinates of results.nc
+        ('base = "demo-small"\n[axes]\n"fabric.material.seed" = [1, 2, 1]\n',
+         "axes.'fabric.material.seed' has the value 1 twice; allowed: distinct values"),
+        ('base = "demo-small"\n[axes]\n"projectile.mass" = [0.05, 0.050]\n',
+         "axes.'projectile.mass' has the value 0.05 twice"),
+        # a key both set and varied: the varied values silently replaced the set one
+        ('base = "demo-small"\n[set]\n"projectile.mass" = 0.04\n'
+         '[axes]\n"projectile.mass" = [0.05, 0.06]\n',
+         "'projectile.mass' is both set in [set] and varied; allowed: one or the other"),
+        ('base = "demo-small"\n[set]\n"projectile.mass" = 0.04\n[lhs]\nsamples = 2\n'
+         'ranges = {"projectile.mass" = [0.05, 0.06]}\n',
+         "'projectile.mass' is both set in [set] and varied"),
     ]:
         bad.write_text(text)
         with pytest.raises(StudyError) as info:

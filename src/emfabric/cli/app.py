@@ -126,9 +126,14 @@ def load_or_exit(scenario: str, overrides: list[str] | None):
 def hold_folder(folder: Path) -> None:
     """Hold the output folder for the rest of the command (emfabric.io.lock): exit 2 with the
     holder named if another emfabric process holds it, exit 1 if it cannot be written. The
-    lock is released when the command ends, however it ends."""
+    lock is released when the command ends, however it ends. A file where the folder should
+    be is the user's input: exit 2."""
     from emfabric.io.lock import FolderInUse, acquire
 
+    if folder.exists() and not folder.is_dir():
+        error(f"{folder} is a file, not a folder; allowed: --out a folder (new, empty or one "
+              "emfabric wrote)")
+        raise typer.Exit(EXIT_INPUT)
     try:
         lock = acquire(folder)
     except FolderInUse as err:

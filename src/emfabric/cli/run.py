@@ -103,10 +103,6 @@ def run(
             out_dir = Path("runs") / Path(scenario).stem  # a copied file keeps its own folder
         else:
             out_dir = Path("runs") / sc.name
-        if out_dir.exists() and not out_dir.is_dir():
-            error(f"{out_dir} is a file, not a folder; allowed: --out a folder (new, empty or "
-                  "a run's)")
-            raise typer.Exit(EXIT_INPUT)
         hold_folder(out_dir)  # one run at a time in a folder: exit 2 naming the holder
         from emfabric.io.outputs import clear_run, run_in
 

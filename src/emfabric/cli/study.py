@@ -263,8 +263,9 @@ def design_field(
 @app.command("ballistic-limit",
              short_help="The ballistic limit V_BL (V50 with --seeds) and residual speeds.")
 def ballistic_limit(
-    scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name (yarns "
-                                                 "must break: e.g. `rupture`)")],
+    scenario: Annotated[str, typer.Argument(help="TOML file or built-in scenario name (a "
+                                                 "shot perforates where yarns break or a "
+                                                 "pointed nose parts them: e.g. `rupture`)")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Folder: ballistic.json, .nc, .png "
                                                           "and the shots' cases")],
     seeds: Annotated[int, typer.Option(

@@ -5,7 +5,8 @@ Two kinds, both from numbers the scenario gives:
 - **Warnings** (`pre_run_warnings`): a scenario that can run but is probably a typing mistake —
   a projectile larger than the sheet, a path that misses the sheet or leads away from it, a
   sheet, projectile or mass far outside anything ballistic (mm or g typed as m or kg), a
-  projectile that falls between the nodes. Each says what was found and the likely fix. They
+  projectile that falls between the nodes, a solver key the chosen integrator does not read.
+  Each says what was found and the likely fix. They
   are warnings, not errors: a 1000 kg body standing in for a constant-speed driver, or a shot
   fired away on purpose, are legitimate experiments.
 - **The output volume** (`output_volume`, `check_output_volume`): snapshots × (nodes and
@@ -145,10 +146,33 @@ def _datasheet_warnings(sc) -> list[str]:
     return out
 
 
+def _solver_warnings(sc) -> list[str]:
+    """Solver keys given values the chosen integrator does not read (a φ-scheme key with
+    central differences, courant with the φ-scheme). Compared with the
+    defaults, not with the keys a file writes: a run's own scenario (a checkpoint's, a study
+    case's) writes every key."""
+    from emfabric.config.scenario import PHI_KEYS, SolverSpec
+
+    solver, default = sc.solver, SolverSpec()
+    if solver.integrator == "central-difference":
+        unread, reader = PHI_KEYS, 'the φ-scheme (solver.integrator = "phi")'
+    else:
+        # (a bulk viscosity other than 0 is an error of the scenario with the φ-scheme)
+        unread, reader = ("courant",), "central differences"
+    changed = [f"solver.{k} = {getattr(solver, k)!r}" for k in unread
+               if getattr(solver, k) != getattr(default, k)]
+    if not changed:
+        return []
+    return [f"{', '.join(changed)}: read only by {reader}; solver.integrator = "
+            f"{solver.integrator!r} runs without {'it' if len(changed) == 1 else 'them'}"]
+
+
 def pre_run_warnings(model) -> list[str]:
     """What in this model is probably not what the user meant (see the module docstring)."""
     sc = model.scenario
     out: list[str] = []
+    if sc is not None:
+        out += _solver_warnings(sc)
     x0 = model.nodes.x0
     live = model.nodes.mass > 0
     lo = x0[:2, live].min(axis=1) if live.any() else np.zeros(2)

@@ -110,6 +110,15 @@ class Study(BaseModel):
         for key, values in self.axes.items():
             if not values:
                 raise ValueError(f"axes.{key!r} is empty; allowed: a list of values")
+            for i, value in enumerate(values):
+                if any(value == earlier for earlier in values[:i]):
+                    raise ValueError(f"axes.{key!r} has the value {value!r} twice; allowed: "
+                                     "distinct values (each is a coordinate of results.nc)")
+        varied = set(self.axes) | (set(self.lhs.ranges) if self.lhs is not None else set())
+        both = sorted(varied & set(self.set))
+        if both:
+            raise ValueError(f"{both[0]!r} is both set in [set] and varied; allowed: one or "
+                             "the other (the varied values would replace the set one)")
         return self
 
 
@@ -472,6 +481,10 @@ def connect(workers: int | None, scheduler: str | None, threads: int | None
                              "workers are started by you")
         try:
             client = Client(scheduler, timeout="5s")
+        except (ValueError, TypeError) as err:  # an address Dask cannot parse
+            raise StudyError(f"--scheduler {scheduler!r}: not a Dask scheduler address "
+                             f"({err}); allowed: tcp://HOST:PORT (or HOST:PORT), as `dask "
+                             f"scheduler` prints it") from None
         except (OSError, TimeoutError) as err:
             raise StudyError(f"cannot reach the Dask scheduler at {scheduler!r} ({err}); "
                              f"start one with `dask scheduler` and `dask worker ADDRESS`, or "
