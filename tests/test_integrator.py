@@ -10,7 +10,7 @@ from emfabric.runner.loop import run
 from emfabric.sim.builder import build_model
 from emfabric.sim.state import initial_state, update_forces
 
-from conftest import fabric_only
+from conftest import fabric_only, make
 
 
 def _prestretched(phi, dt, **kw):
@@ -229,6 +229,20 @@ def test_dt_min_stops_with_a_clear_error():
     # the step it stopped at, in the message and on the error
     assert f"Δt = {info.value.dt:.3g} s" in msg and 0.0 < info.value.dt < 5e-7
     assert info.value.result.status == "diverged"
+
+
+def test_a_non_finite_step_says_where_it_went_non_finite():
+    """A field too strong for the numbers (|B| overflows in q B Δt / m) makes the first step
+    non-finite everywhere but at the clamped edge: the message names a free node whose
+    position went non-finite, not only the largest force of the state before (an edge node's
+    1e-10 N here)."""
+    sc = make(**{"fabric.nodes": [10, 10], "field.B": [1e300, 0.0, 0.0],
+                 "solver.end_time": 2e-6})
+    with pytest.raises(DivergenceError) as info:
+        run(sc)
+    msg = str(info.value)
+    assert "non-finite values in an explicit step" in msg
+    assert "the first non-finite position is node 11's (grid i=1, j=1)" in msg
 
 
 def test_damage_is_monotone_and_rejected_steps_leave_it():

@@ -286,23 +286,39 @@ class IntegratorBase(ABC):
                   "field at the end of a double's range; the warnings name the keys outside "
                   "physical ranges)")
 
-    def fail(self, s_in: State, dt: float, why: str) -> None:
-        """Raise the DivergenceError of a step from s_in at Δt: when, why, and the node with the
-        largest force."""
+    def _grid_of(self, node: int) -> str:
+        """" (ply p, grid i=…, j=…)" of a node."""
+        m = self.model
+        ply = int(np.searchsorted(m.nodes.ply_nodes, node, side="right") - 1)
+        nx = m.ply_grid(ply)[0]
+        local = node - int(m.nodes.ply_nodes[ply])
+        return ((f" (ply {ply + 1}, " if m.ply_count > 1 else " (")
+                + f"grid i={local % nx}, j={local // nx})")
+
+    def fail(self, s_in: State, dt: float, why: str, s_out: State | None = None) -> None:
+        """Raise the DivergenceError of a step from s_in at Δt: when, why, the node with the
+        largest force, and with the step's failed result s_out where it first went non-finite
+        (a node's position, velocity or force, or the projectile's state)."""
         f = np.linalg.norm(s_in.node_f, axis=0)
         node = int(np.argmax(f)) if f.size else -1
         fmax = float(f[node]) if f.size else 0.0
-        where = ""
-        if node >= 0:
-            m = self.model
-            ply = int(np.searchsorted(m.nodes.ply_nodes, node, side="right") - 1)
-            nx = m.ply_grid(ply)[0]
-            local = node - int(m.nodes.ply_nodes[ply])
-            where = (f" (ply {ply + 1}, " if m.ply_count > 1 else " (") + \
-                f"grid i={local % nx}, j={local // nx})"
+        where = self._grid_of(node) if node >= 0 else ""
+        first = ""
+        if s_out is not None:
+            with np.errstate(invalid="ignore"):
+                for name, arr in (("position", s_out.node_x), ("velocity", s_out.node_v),
+                                  ("force", s_out.node_f)):
+                    bad = ~np.isfinite(arr).all(axis=0)
+                    if bad.any():
+                        k = int(np.argmax(bad))
+                        first = f"; the first non-finite {name} is node {k}'s{self._grid_of(k)}"
+                        break
+                else:
+                    if not np.isfinite(s_out.body).all():
+                        first = "; the projectile's state is non-finite"
         raise DivergenceError(
             f"diverged at t = {s_in.t:.6g} s, Δt = {dt:.3g} s: {why}; largest force "
             f"{fmax:.3g} N on node {node}{where} at "
-            f"{tuple(round(float(c), 6) for c in s_in.node_x[:, node])} m",
+            f"{tuple(round(float(c), 6) for c in s_in.node_x[:, node])} m{first}",
             s_in.t, dt, node, fmax,
         )

@@ -182,7 +182,8 @@ class CentralDifference(IntegratorBase):
                 break
             if status == NOT_FINITE:
                 self.fail(s_in, dt, "non-finite values in an explicit step (the step is "
-                          f"{dt / self.courant:.3g} s × courant; the state is not physical)")
+                          f"{dt / self.courant:.3g} s × courant; the state is not physical)",
+                          s_out)
             rejected += 1
             s_out.energy[:] = s_in.energy
             dt *= 0.5
