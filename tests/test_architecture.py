@@ -286,3 +286,65 @@ def test_relative_imports_are_seen_by_their_absolute_names(tmp_path, monkeypatch
     monkeypatch.setattr(here, "SRC", root)
     assert _imported(f) == ["emfabric.runner", "emfabric.runner.loop", "emfabric.sim",
                             "emfabric.sim.state", "emfabric.sim.model", "emfabric.sim.model.M"]
+
+
+def _kernel_functions() -> dict[tuple[str, str], tuple[ast.FunctionDef, dict[str, str]]]:
+    """Every compiled function of _kernels/ by (module, name): its definition and its
+    decorator's keywords as source text."""
+    out = {}
+    for path in sorted(KERNELS.glob("*.py")):
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            if not isinstance(node, ast.FunctionDef):
+                continue
+            for dec in node.decorator_list:
+                if ast.unparse(dec).split("(")[0] == "njit":
+                    kw = ({k.arg: ast.unparse(k.value) for k in dec.keywords}
+                          if isinstance(dec, ast.Call) else {})
+                    out[(path.stem, node.name)] = (node, kw)
+    return out
+
+
+def _kernel_names(stem: str) -> dict[str, tuple[str, str]]:
+    """The names module _kernels/<stem>.py can call a kernel function by: its own functions
+    and those it imports from the other kernel modules."""
+    tree = ast.parse((KERNELS / f"{stem}.py").read_text(encoding="utf-8"))
+    names = {n.name: (stem, n.name) for n in tree.body if isinstance(n, ast.FunctionDef)}
+    for node in tree.body:
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith(
+                "emfabric._kernels."):
+            for a in node.names:
+                names[a.asname or a.name] = (node.module.rsplit(".", 1)[1], a.name)
+    return names
+
+
+def test_functions_called_without_reference_counts_set_their_own():
+    """A kernel compiled with `_nrt=False` (the step kernels, the row kernels) passes the flag
+    on to every function it compiles that does not set one: that function then compiles
+    without reference counts or not at all where it allocates — and with the flags of
+    whichever caller compiled it first in a process, or in the cache. So each function such a
+    kernel calls directly (looking through those inlined into it) sets `_nrt` itself
+    (emfabric._kernels.explicit's docstring)."""
+    kernels = _kernel_functions()
+    names = {stem: _kernel_names(stem) for stem in {k[0] for k in kernels}}
+    unset = []
+
+    def walk(key, root, seen):
+        fn, _kw = kernels[key]
+        for node in ast.walk(fn):
+            if not (isinstance(node, ast.Call) and isinstance(node.func, ast.Name)):
+                continue
+            callee = names[key[0]].get(node.func.id)
+            if callee is None or callee not in kernels or callee in seen:
+                continue
+            seen.add(callee)
+            kw = kernels[callee][1]
+            if kw.get("inline") == "'always'":
+                walk(callee, root, seen)
+            elif "_nrt" not in kw:
+                unset.append(f"{'.'.join(callee)} (called by {'.'.join(root)})")
+
+    roots = [k for k, (_fn, kw) in kernels.items() if kw.get("_nrt") == "False"]
+    assert ("explicit", "central_step") in roots and ("step", "attempt_step") in roots
+    for key in roots:
+        walk(key, key, set())
+    assert not unset, unset

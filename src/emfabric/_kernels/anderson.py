@@ -22,7 +22,7 @@ def _dot(a, b):
     return s
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def anderson_mix(k, x, g, d_f, d_g, f_prev, g_prev, gram):
     """Overwrite the iterate x (3, N) with the Anderson update from g = G(x), iteration k ≥ 1.
 

@@ -18,7 +18,7 @@ from emfabric._kernels.vec3 import (
 )
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def field_wrench(body, fld, t, b_state, force, moment):
     """Force and moment about the centre of mass of the body's charges (6.2–6.6) and gravity,
     for the body state b_state (BODY_ROWS, 3) at time t."""
@@ -47,7 +47,7 @@ BODY_ITERATION_LIMIT = 100
 """Iterations of the rotation's fixed point (eq. B16) within one body update."""
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def body_update(body, fld, b_in, b_out, t1, phi, dt, reaction, scratch, tol):
     """One fixed-point update of the body from the previous iterate in b_out, at time t1, with
     the contact reaction (2, 3) (impulse [N s] and its moment [N m s]) taken whole; scratch:

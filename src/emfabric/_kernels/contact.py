@@ -157,7 +157,7 @@ def ply_penalty(share, stiff, gap, g, m_nk, nh, v, v0, n, km, law, phi_dt):
     return fn * nh[0] - k * tx, fn * nh[1] - k * ty, fn * nh[2] - k * tz
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def find_candidates(x, inv_mass, centre, reach, cand, flag):
     """Free nodes within `reach` of the body centre; returns their count."""
     count = 0
@@ -196,7 +196,7 @@ SEGMENT_SETTLED = 1e-9
 speed scale |v| + R|ω|."""
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def find_segment_candidates(yarns, alpha, broken_below, x, inv_mass, centre, reach, work,
                             ncand):
     """Unbroken segments with a free end that pass within `reach` of the body centre (at the
@@ -237,7 +237,7 @@ def find_segment_candidates(yarns, alpha, broken_below, x, inv_mass, centre, rea
     return ncand, count
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def node_contact(nodes, body, law, b_state, ncand, x1, v1, work, phi, dt, frozen):
     """Resolve contact of the candidate nodes against the body in the state b_state.
 
@@ -369,7 +369,7 @@ def _drift_segment_ends(inv_mass, first, nc, x1, work, lag):
                 share[0, node] = 0.0
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def segment_contact(phys, b_state, nseg, nc, x1, v1, work, lag, was, now):
     """Resolve contact of the candidate segments (phys: the Physics record) against the body,
     after node contact.
@@ -604,7 +604,7 @@ def node_row(nodes, n):
     return j0 + (n - nodes.ply_nodes[p]) // nodes.rows[j0, ROW_COUNT]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def candidate_errors(nodes, ncand, cand, x0, xk, x1, row_sums):
     """Add the contact candidates' terms of the error measure (after contact moved them)."""
     for idx in range(ncand):
@@ -620,7 +620,7 @@ def candidate_errors(nodes, ncand, cand, x0, xk, x1, row_sums):
         row_sums[SUM_ERROR_DEN, row] += math.sqrt(ex * ex + ey * ey + ez * ez)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def reaction_sums(nc, c_imp, c_arm, buf, imp_force, imp_moment):
     """Exactly rounded totals of −J and −r × J over the contacts (order-independent)."""
     for c in range(3):

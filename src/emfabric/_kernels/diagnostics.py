@@ -181,7 +181,7 @@ def fabric_diagnostics(phys, x, v, alpha, centre, direction, out):
     out[RECEDE_MAX] = recede
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def fabric_from_rows(sums, ny, out):
     """fabric_diagnostics's results from the rows' shares that central differences' kick
     leaves in the row sums (records.SUM_DIAG: sums, largest or smallest values per grid

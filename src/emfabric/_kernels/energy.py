@@ -119,7 +119,7 @@ def step_energy(phys, sin, sout, nc, work, t0, phi, dt, out):
     out[ENERGY_DAMAGE] += d_dam
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def damage_release(yarns, mat, x0, x, alpha_before, alpha_after, weight):
     """Energy released by damage over a step from x0 to x [J]: each segment's α drop times its
     stored energy at the positions x (eq. 2.6 lowers α at fixed stretch; a brittle yarn loses
@@ -159,7 +159,7 @@ def damage_release(yarns, mat, x0, x, alpha_before, alpha_after, weight):
     return d_dam
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def impulse_dissipation(nc, work, v_before, v_after, v_body, w_body):
     """Normal and friction dissipation [J] of the step's nc contact impulses (work.c_*): for
     each, −J·(v̄_point − v̄_fabric) split along the normal, v̄_fabric the mean of the fabric

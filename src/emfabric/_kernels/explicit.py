@@ -32,6 +32,16 @@ and their work over the placement as projection, so the balance error measures t
 own error, O(h²) per unit time. The yarns' viscous force (solver.bulk_viscosity) is not
 conservative: its work is booked by the kicks as the field's is (h/2 f_v·v̄ each, with the
 State's fv for the first), as viscous dissipation.
+
+The step kernel (central_step, and the φ-scheme's step.attempt_step) is compiled with
+`_nrt=False`, without Numba's reference counting in its own body: called from Python, its entry
+then wraps the ~200 arrays of its records without a reference-counted MemInfo each (a malloc,
+an atomic count and a free per array per call: 5.3 µs of a demo-small step), and every
+reference count its callees take on those arrays is a test for null, not an atomic operation.
+A function compiled from it inherits the flag unless it sets its own, and one without counts
+cannot allocate, so each function it calls directly (past those inlined) sets `_nrt=True`
+(or `_nrt=False`, the row kernels): they compile as they would from Python
+(tests/test_architecture.py checks that none inherits; docs/performance.md measures it).
 """
 
 import math
@@ -114,7 +124,7 @@ from emfabric._kernels.vec3 import (
 OK, NOT_FINITE, CONTACT_MISSED, BODY_NOT_CONVERGED = 0, 2, 3, 4
 """Status of a step (the φ kernel's codes where they mean the same)."""
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _sum_rows(a, ny):
     """Σ a[:ny] in row order (a fixed order, whatever the thread count)."""
     total = 0.0
@@ -153,7 +163,7 @@ def _spin_solve(rot, body, h_vec, scratch):
     return world_inertia_solve(rot, body.inertia, h_vec, scratch[3:7])
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _mid_rotation(body, rot0, h_half, dt, tol, scratch, rot1):
     """ω_{n+½} = Ī(exp(Δt/2 ω) R_n)⁻¹ H_{n+½} by fixed-point iteration from the Ī(R_n)⁻¹ H
     guess, then R_{n+1} = exp(Δt ω) R_n into rot1. Returns (ω, converged)."""
@@ -174,7 +184,7 @@ def _mid_rotation(body, rot0, h_half, dt, tol, scratch, rot1):
     return w, False
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _node_contact(phys, sin, sout, work, ncand, dt):
     """Contact of the candidate nodes after the drift (see the module docstring): impulses on
     sout.v (the velocity before them in work.v_pre), placement on sout.x, the contact records
@@ -259,7 +269,7 @@ def _node_contact(phys, sin, sout, work, ncand, dt):
     return nc
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _friction_work(phys, sin, sout, work, nc, half, omega):
     """The work friction does against the slip over the step [J]: for each of the nc contacts,
     J_t·(s₀ + s₁)/2, the slip velocities s = v_point − v_fabric of the contact point (a node, or
@@ -306,7 +316,7 @@ def _friction_work(phys, sin, sout, work, nc, half, omega):
     return d
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _body_field_work(phys, b0, b1, t0, t1):
     """Work of the electric field on the body's charges over the step [J] (the mean field at
     the two ends times each charge's displacement)."""
@@ -326,7 +336,7 @@ def _body_field_work(phys, b0, b1, t0, t1):
     return w
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _travel_from_rows(phys, sums, ny, b_state):
     """contact.travel_step at the kick's end state from its per-row largest |v|² and velocity
     bounds (records.SUM_MOTION): the same value (maxima and minima are exact)."""
@@ -341,7 +351,7 @@ def _travel_from_rows(phys, sums, ny, b_state):
     return travel_limit(phys, fastest, lo, hi, b_state)
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol, energy):
     """One central-difference step from sin (at t) to sout (at t + Δt): nodes, body, contact,
     damage committed, the energy terms of the step added to energy (records.ENERGY_TERMS). sin

@@ -356,7 +356,7 @@ def with_sources(fld):
     return not (fld.loops is None and fld.map_axes is None and fld.grid_values is None)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def fill_node_fields(fld, x, v, dt, t, out):
     """The field of a field with sources at every node, once per attempted step: out (6, N)
     = Ex Ey Ez Bx By Bz at the predicted position x + Δt v and time t (the step's end).
@@ -367,7 +367,7 @@ def fill_node_fields(fld, x, v, dt, t, out):
     fill_fields(fld.grid_values, fld, x, v, dt, t, out)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def electric_at_nodes(fld, nf, x, out):
     """out (3, N) = the electric field the node update used at the nodes x: the stored field of
     the attempt for sources (nf, at its time), field_at's for the uniform field."""
@@ -382,7 +382,7 @@ FIELD_CHUNK = 512
 """Nodes per task of fill_node_fields_threads."""
 
 
-@njit(parallel=True)  # never cached on its own, as nodes.fused_iterate_threads
+@njit(parallel=True, _nrt=True)  # never cached on its own, as nodes.fused_iterate_threads
 def fill_node_fields_threads(fld, x, v, dt, t, out):
     """fill_node_fields over chunks of nodes in parallel threads (each node's field is the
     same arithmetic whatever the thread count)."""

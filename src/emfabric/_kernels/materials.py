@@ -95,7 +95,7 @@ def strain_energy_density(u2, mat):
     return ksv_energy(u2)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def damage_thresholds(alpha, mat, fail2, out, done):
     """For each segment, the stretch² above which damage_above() can give less than its
     committed α. Eq. 2.6: α falls only where exp(−λ(U − U_c)/U_c) < α, i.e. U > U_c (1 − ln α /

@@ -73,7 +73,7 @@ from emfabric._kernels.records import (
 from emfabric._kernels.reductions import from_key, lane_sums, order_key
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _row_sums(err_num, err_den, rows, row_sums):
     """Per-row sums of the error terms in a fixed order (four interleaved partial sums).
 
@@ -564,7 +564,7 @@ def fused_iterate(phys, prev, sin, sout, work, t1, phi, dt, rowbuf):
     _row_sums(work.err_num, work.err_den, phys.nodes.rows, work.row_sums)
 
 
-@njit  # never cached on its own: see fused_iterate_threads' docstring
+@njit(_nrt=True)  # never cached on its own: see fused_iterate_threads' docstring
 def fused_iterate_threads(phys, prev, sin, sout, work, t1, phi, dt, rowbuf):
     """fused_iterate over blocks of ROWS_PER_BLOCK rows in parallel threads; rowbuf (blocks,
     ROWBUF_ROWS, nx + 1). Every value is computed by the same arithmetic as in the serial
@@ -1008,7 +1008,7 @@ def kick_rows(phys, sin, sout, work, t1, dt, rowbuf):
     _kick_block(int64(0), phys.nodes.ny, rec, sin, sout, work, t1, dt, rowbuf)
 
 
-@njit  # never cached on its own, as fused_iterate_threads
+@njit(_nrt=True)  # never cached on its own, as fused_iterate_threads
 def drift_rows_threads(phys, sin, sout, work, t0, dt, rowbuf):
     """drift_rows over blocks of ROWS_PER_BLOCK rows in parallel threads (rowbuf (blocks,
     ROWBUF_ROWS, nx + 1)); the same arithmetic as the serial kernel."""
@@ -1026,7 +1026,7 @@ def _drift_threads(nodes, yarns, mat, fld, sin, sout, work, t0, dt, rowbuf):
                      sout, work, t0, dt, rowbuf[b])
 
 
-@njit  # never cached on its own, as fused_iterate_threads
+@njit(_nrt=True)  # never cached on its own, as fused_iterate_threads
 def kick_rows_threads(phys, sin, sout, work, t1, dt, rowbuf):
     """kick_rows over blocks of ROWS_PER_BLOCK rows in parallel threads (rowbuf (blocks,
     ROWBUF_ROWS, nx + 1)); the same arithmetic as the serial kernel."""

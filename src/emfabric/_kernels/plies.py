@@ -449,7 +449,7 @@ def _all_pairs(phys, x, v, nrm, acc, phi_dt, v_start, near):
               law_p)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def ply_forces(phys, x, v, v_start, work, out, phi_dt):
     """The φ-scheme's ply contact: the force on every node [N] at positions x and velocities v
     into out (3, node_count), summed exactly (integers of Contact.ply_quantum[2]: +F on one node
@@ -622,7 +622,7 @@ rad/s at courant 0.25 / 0.125; docs/theory.md §5.1). Relative to the step's own
 velocities are resolved to the same fraction at any step."""
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def ply_contact(phys, sin, x, v, work, lag, driven):
     """Ply-to-ply contact of every pair of neighbouring plies at positions x and velocities v
     (changed in place); work.ply_normals holds the plies' normals afterwards; sin: the state

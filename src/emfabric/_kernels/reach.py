@@ -25,9 +25,9 @@ BISECTIONS = 24
 
 @njit(cache=True)
 def two_ball_max(c1, r1, c2, r2, e):
-    """The largest x·e over the intersection of the balls (c1, r1) and (c2, r2) (c: (3,)
-    arrays; an empty intersection gives the smaller ball's own largest value, an upper
-    bound either way)."""
+    """The largest x·e over the intersection of the balls (c1, r1) and (c2, r2) (c, e: three
+    numbers, a tuple or a (3,) array; an empty intersection gives the smaller ball's own
+    largest value, an upper bound either way)."""
     top1 = c1[0] * e[0] + c1[1] * e[1] + c1[2] * e[2] + r1
     top2 = c2[0] * e[0] + c2[1] * e[1] + c2[2] * e[2] + r2
     ux = c2[0] - c1[0]
@@ -118,12 +118,20 @@ def _halves(rows, j0, j1, inv_mass, rest, keff, fam, clamp, length, comp):
                 comp[row, node] = q
 
 
+@njit(cache=True, inline="always")
+def _point(x, k):
+    """Node k's position in x (3, N) as three numbers."""
+    return (x[0, k], x[1, k], x[2, k])
+
+
 @njit(cache=True)
 def fabric_reach(rows, ply_rows, x0, inv_mass, rest, keff, energy, e, limit, first):
-    """The largest x·e any free node of the clamped fabric can ever reach with at most
-    `energy` in it (keff: each segment's lower-bound stiffness, 0 for a broken one), or +inf
-    as soon as a node's bound passes `limit` or a node hangs on no yarn clamped at both ends.
-    Node `first` is tried first (the one likeliest to fail: the test then ends at once)."""
+    """A bound on the largest x·e any free node of the clamped fabric can ever reach with at
+    most `energy` in it (keff: each segment's lower-bound stiffness, 0 for a broken one), or
+    +inf as soon as a node's bound passes `limit` or a node hangs on no yarn clamped at both
+    ends. The verdict against `limit` is that of each node's tightest bound; a node shown below
+    it stops tightening its bound there. Node `first` is tried first (the one likeliest to
+    fail: the test then ends at once)."""
     n = x0.shape[1]
     clamp = np.full((4, n), -1, dtype=np.int64)
     length = np.zeros((4, n))
@@ -133,6 +141,9 @@ def fabric_reach(rows, ply_rows, x0, inv_mass, rest, keff, energy, e, limit, fir
         j1 = ply_rows[ply + 1]
         _halves(rows, j0, j1, inv_mass, rest, keff, 0, clamp, length, comp)
         _halves(rows, j0, j1, inv_mass, rest, keff, 1, clamp, length, comp)
+    # the clamps' positions and the direction as numbers, not array views: a view per call
+    # (each reference-counted) made this 10–20 × slower (docs/performance.md)
+    et = (e[0], e[1], e[2])
     reach = -math.inf
     for idx in range(-1, n):
         node = first if idx < 0 else idx
@@ -144,35 +155,42 @@ def fabric_reach(rows, ply_rows, x0, inv_mass, rest, keff, energy, e, limit, fir
             return math.inf
         bw = math.inf
         bf = math.inf
+        wa = _point(x0, clamp[0, node]) if warp else et
+        wb = _point(x0, clamp[1, node]) if warp else et
+        fa = _point(x0, clamp[2, node]) if fill else et
+        fb = _point(x0, clamp[3, node]) if fill else et
         if warp:
-            bw = yarn_reach(x0[:, clamp[0, node]], length[0, node], comp[0, node],
-                            x0[:, clamp[1, node]], length[1, node], comp[1, node], energy, e)
+            bw = yarn_reach(wa, length[0, node], comp[0, node],
+                            wb, length[1, node], comp[1, node], energy, et)
         if fill:
-            bf = yarn_reach(x0[:, clamp[2, node]], length[2, node], comp[2, node],
-                            x0[:, clamp[3, node]], length[3, node], comp[3, node], energy, e)
+            bf = yarn_reach(fa, length[2, node], comp[2, node],
+                            fb, length[3, node], comp[3, node], energy, et)
         bound = min(bw, bf)  # each yarn alone with all the energy: a first, cheap bound
         if bound > limit and warp and fill:
             # the energy is shared between the two yarns: bisect the split where the warp's
-            # bound meets the fill's (each grows with its share)
+            # bound meets the fill's (each grows with its share). The crossing lies in
+            # [lo, hi], so min(warp's bound at hi, fill's at energy − lo) bounds the node at
+            # every bisection, and it only falls: once below the limit, the node passes (the
+            # same verdict as bisecting on; its bound then a little looser)
             lo = 0.0
             hi = energy
+            gw_hi = bw  # the warp's bound with hi = energy, the fill's with energy − lo
+            gf_lo = bf
             for _ in range(BISECTIONS):
+                if min(gw_hi, gf_lo) < limit:
+                    break
                 mid = 0.5 * (lo + hi)
-                gw = yarn_reach(x0[:, clamp[0, node]], length[0, node], comp[0, node],
-                                x0[:, clamp[1, node]], length[1, node], comp[1, node], mid, e)
-                gf = yarn_reach(x0[:, clamp[2, node]], length[2, node], comp[2, node],
-                                x0[:, clamp[3, node]], length[3, node], comp[3, node],
-                                energy - mid, e)
+                gw = yarn_reach(wa, length[0, node], comp[0, node],
+                                wb, length[1, node], comp[1, node], mid, et)
+                gf = yarn_reach(fa, length[2, node], comp[2, node],
+                                fb, length[3, node], comp[3, node], energy - mid, et)
                 if gw < gf:
                     lo = mid
+                    gf_lo = gf
                 else:
                     hi = mid
-            gw = yarn_reach(x0[:, clamp[0, node]], length[0, node], comp[0, node],
-                            x0[:, clamp[1, node]], length[1, node], comp[1, node], hi, e)
-            gf = yarn_reach(x0[:, clamp[2, node]], length[2, node], comp[2, node],
-                            x0[:, clamp[3, node]], length[3, node], comp[3, node],
-                            energy - lo, e)
-            bound = min(bound, gw, gf)
+                    gw_hi = gw
+            bound = min(bound, gw_hi, gf_lo)
         if bound > limit:
             return math.inf
         reach = max(reach, bound)

@@ -206,7 +206,7 @@ SHAPES = {"sphere": SHAPE_SPHERE, "ogive": SHAPE_OGIVE, "cylinder": SHAPE_CYLIND
           "fsp": SHAPE_FSP}
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def nodes_inside(x, inv_mass, flag, body, b_state):
     """Free nodes (inv_mass > 0) with flag 0 inside the body in state b_state (BODY_ROWS, 3):
     after a step, nodes that were no contact candidates (must be none); before a run, every

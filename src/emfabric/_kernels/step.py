@@ -4,6 +4,9 @@ Every iterate evaluates, in this order: yarn tensions and damage at the previous
 forces (yarn + Lorentz + gravity) and the φ-update; contact and friction against the body's
 previous iterate; the body's translation and rotation from the summed reactions; the error
 measure ϖ_K. The initial iterate is the start-of-step state (ϖ_0 = 1).
+
+attempt_step is compiled without reference counting in its own body, as central_step is
+(emfabric._kernels.explicit says why and what its callees must then set).
 """
 
 import math
@@ -50,7 +53,7 @@ non-finite value; a free node found inside the body that was no contact candidat
 rotation (eq. B16) not converged within body.BODY_ITERATION_LIMIT at the last iterate."""
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def _predict(x0, v0, f0, inv_mass, phi, dt, out):
     """The initial iterate x0 + Δt v0 + φΔt² ψ(t)/m: the φ-update with the start-of-step forces
     (an explicit predictor; the iteration then starts O(Δt³) from its fixed point, not O(Δt))."""
@@ -80,7 +83,7 @@ def fabric_iterate(phys, prev, sin, sout, work, rowbuf, threads, t1, phi, dt):
         fused_iterate(phys, prev, sin, sout, work, t1, phi, dt, rowbuf)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def ply_update(phys, work, x1, v1, f1, xk, x0, phi, dt):
     """Add ply contact to the φ-update of the nodes it acts on: the force at the iterate xk
     (work.ply_force, plies.ply_forces) weighted φ and the force at the start of the step
@@ -140,7 +143,7 @@ def ply_update(phys, work, x1, v1, f1, xk, x0, phi, dt):
                     + (x1[2, n] - x0[2, n]) ** 2) - g_old
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, _nrt=False)
 def attempt_step(phys, solver, sin, sout, work, rowbuf, threads, plies, segs, t, dt, accel):
     """Iterate the coupled step from time t to t + Δt to ϖ_K ≤ solver.tolerance within
     solver.iteration_limit iterations (phys: a Physics record, sin/sout: StateArrays).

@@ -102,7 +102,7 @@ def solve_in_place(a, b, n):
         b[r] = s / a[r, r]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def solve3(m, v, scratch):
     """m⁻¹ · v for a 3 × 3 array m (partial pivoting), as a tuple; scratch (4, 3) is
     overwritten (rows 0–2 the eliminated matrix, row 3 the solution)."""
@@ -168,7 +168,7 @@ def yaw_angle(rot, nose_body, v):
     return math.atan2(norm(cross(axis, v)), dot(axis, v))
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)
 def copy_into(dst, src):
     """dst[...] = src for 2-D arrays of one shape, as a plain loop: Numba's array assignment
     compiles a broadcast check whose error message alone costs seconds of first-run compile."""

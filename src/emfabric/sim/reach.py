@@ -88,8 +88,9 @@ def fabric_energy_bound(kinetic: float, strain: float) -> float:
 
 def reach_along(model: Model, state: State, direction: np.ndarray, energy: float,
                 limit: float) -> float:
-    """The largest x·direction any node of the fabric can ever reach with at most `energy`
-    (+inf when it cannot be bounded or passes `limit`)."""
+    """A bound on the largest x·direction any node of the fabric can ever reach with at most
+    `energy` (+inf when it cannot be bounded or passes `limit`; below `limit` it may be looser
+    than the tightest: _kernels.reach.fabric_reach)."""
     nodes = model.nodes
     if not np.any(nodes.inv_mass == 0.0):
         return float("inf")
