@@ -126,6 +126,41 @@ def test_parallel_kernels_are_not_cached_on_their_own():
         assert not callers, f"the cached parallel kernel {name} is called from {callers}"
 
 
+LEAK_CHECK = textwrap.dedent("""
+    import json, sys
+    import emfabric
+    from emfabric.config.scenario import load_scenario
+    from numba.core.runtime import rtsys
+    out = []
+    for name, over, threads in json.loads(sys.argv[1]):
+        emfabric.run(load_scenario(name, over), None, threads=threads)  # compile or load
+        s0 = rtsys.get_allocation_stats()
+        emfabric.run(load_scenario(name, over), None, threads=threads)
+        s1 = rtsys.get_allocation_stats()
+        out.append([name, s1.alloc - s0.alloc, s1.free - s0.free,
+                    s1.mi_alloc - s0.mi_alloc, s1.mi_free - s0.mi_free])
+    print(json.dumps(out))
+""")
+
+
+def test_kernels_called_without_reference_counts_leak_nothing():
+    """The step kernels run without reference counts (emfabric._kernels.explicit says why):
+    an array a callee of theirs allocated and handed back would never be freed. Numba's own
+    allocation counters balance over whole runs of each path: central differences with node,
+    segment and ply contact (an FSP into a pack), threaded, and the φ-scheme with loops'
+    fields."""
+    cases = [["pack-fsp", {"fabric.nodes": [15, 15], "solver.end_time": 2e-6}, None],
+             ["demo-small", {"solver.end_time": 5e-6}, 2],
+             ["coil-pulse", {"fabric.nodes": [20, 20], "solver.end_time": 5e-6,
+                             "solver.integrator": "phi"}, None]]
+    env = {**os.environ, "NUMBA_NRT_STATS": "1"}
+    res = subprocess.run([sys.executable, "-c", LEAK_CHECK, json.dumps(cases)], env=env,
+                         capture_output=True, text=True, timeout=900)
+    assert res.returncode == 0, res.stderr[-2000:]
+    for name, alloc, free, mi_alloc, mi_free in json.loads(res.stdout.splitlines()[-1]):
+        assert alloc > 0 and alloc == free and mi_alloc == mi_free, (name, alloc, free)
+
+
 def test_importing_the_package_touches_no_file(tmp_path):
     """Importing emfabric._kernels (a record type, say) chooses, creates and prunes nothing;
     the first kernel module imported does, and prunes digest folders unused for 30 days."""

@@ -35,7 +35,7 @@ State's fv for the first), as viscous dissipation.
 
 The step kernel (central_step, and the φ-scheme's step.attempt_step) is compiled with
 `_nrt=False`, without Numba's reference counting in its own body: called from Python, its entry
-then wraps the ~200 arrays of its records without a reference-counted MemInfo each (a malloc,
+then wraps the ~100 arrays of its records without a reference-counted MemInfo each (a malloc,
 an atomic count and a free per array per call: 5.3 µs of a demo-small step), and every
 reference count its callees take on those arrays is a test for null, not an atomic operation.
 A function compiled from it inherits the flag unless it sets its own, and one without counts

@@ -142,7 +142,7 @@ def fabric_reach(rows, ply_rows, x0, inv_mass, rest, keff, energy, e, limit, fir
         _halves(rows, j0, j1, inv_mass, rest, keff, 0, clamp, length, comp)
         _halves(rows, j0, j1, inv_mass, rest, keff, 1, clamp, length, comp)
     # the clamps' positions and the direction as numbers, not array views: a view per call
-    # (each reference-counted) made this 10–20 × slower (docs/performance.md)
+    # (each reference-counted) made a pass over the nodes 2–3 × slower (docs/performance.md)
     et = (e[0], e[1], e[2])
     reach = -math.inf
     for idx in range(-1, n):
