@@ -7,8 +7,11 @@ module fills; it computes nothing.
 
 from __future__ import annotations
 
+import functools
 import math
 import weakref
+from collections.abc import Mapping
+from types import MappingProxyType
 from typing import NamedTuple
 
 import numpy as np
@@ -107,10 +110,12 @@ def row_width(plies: int) -> int:
     return COLUMNS + len(PLY_RECORD) * plies
 
 
-def ply_layout(plies: int) -> dict[str, slice]:
-    """Columns of each PLY_RECORD variable in a history row of a pack of `plies` plies."""
-    return {name: slice(COLUMNS + k * plies, COLUMNS + (k + 1) * plies)
-            for k, name in enumerate(PLY_RECORD)}
+@functools.cache
+def ply_layout(plies: int) -> Mapping[str, slice]:
+    """Columns of each PLY_RECORD variable in a history row of a pack of `plies` plies (built
+    once per ply count and read-only: the record of every step looks it up)."""
+    return MappingProxyType({name: slice(COLUMNS + k * plies, COLUMNS + (k + 1) * plies)
+                             for k, name in enumerate(PLY_RECORD)})
 
 
 class FabricDiagnostics(NamedTuple):
