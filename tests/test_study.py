@@ -1,6 +1,7 @@
 """Studies (issue 14): sweeps on Dask, resumable, fault-tolerant; results.nc."""
 
 import json
+import logging
 import subprocess
 import sys
 import time
@@ -163,6 +164,20 @@ def test_unreachable_scheduler_fails_at_once(tmp_path):
     assert time.monotonic() - t0 < 60
 
 
+def test_the_command_line_says_when_a_set_key_is_also_varied(tmp_path):
+    """The set value a study's axis replaces is named on stderr before the runs (a study's
+    command shows no log messages of its own: the warning is printed, not logged)."""
+    study = tmp_path / "s.toml"
+    study.write_text('base = "demo-small"\n[set]\n"fabric.nodes" = [11, 11]\n'
+                     '"solver.end_time" = 2e-6\n"projectile.mass" = 0.04\n'
+                     '[axes]\n"projectile.mass" = [0.05]\n')
+    res = subprocess.run([sys.executable, "-m", "emfabric", "sweep", str(study), "--out",
+                          str(tmp_path / "o"), "--workers", "1", "-q"],
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert "'projectile.mass' is both set in [set] and varied" in res.stderr
+
+
 @pytest.mark.parametrize("address", ["notanaddress", "tcp://host:abc"])
 def test_a_malformed_scheduler_address_is_an_input_error(tmp_path, address):
     """An address Dask cannot parse is the user's input: exit 2, naming --scheduler and the
@@ -195,7 +210,7 @@ def test_latin_hypercube_puts_one_sample_in_each_stratum(tmp_path):
         assert sorted(np.floor(u * 8).astype(int)) == list(range(8))
 
 
-def test_study_file_errors_say_what(tmp_path):
+def test_study_file_errors_say_what(tmp_path, caplog):
     from emfabric.studies.sweep import StudyError
 
     bad = tmp_path / "bad.toml"
@@ -228,13 +243,6 @@ def test_study_file_errors_say_what(tmp_path):
          "axes.'fabric.material.seed' has the value 1 twice; allowed: distinct values"),
         ('base = "demo-small"\n[axes]\n"projectile.mass" = [0.05, 0.050]\n',
          "axes.'projectile.mass' has the value 0.05 twice"),
-        # a key both set and varied: the varied values silently replaced the set one
-        ('base = "demo-small"\n[set]\n"projectile.mass" = 0.04\n'
-         '[axes]\n"projectile.mass" = [0.05, 0.06]\n',
-         "'projectile.mass' is both set in [set] and varied; allowed: one or the other"),
-        ('base = "demo-small"\n[set]\n"projectile.mass" = 0.04\n[lhs]\nsamples = 2\n'
-         'ranges = {"projectile.mass" = [0.05, 0.06]}\n',
-         "'projectile.mass' is both set in [set] and varied"),
     ]:
         bad.write_text(text)
         with pytest.raises(StudyError) as info:
@@ -242,6 +250,19 @@ def test_study_file_errors_say_what(tmp_path):
         assert f"\n  {line}" in str(info.value)
         for word in ("Extra inputs", "Field required", "Value error", "Input should"):
             assert word not in str(info.value)
+    # a key both set and varied: the varied values replace the set one, which the file's
+    # author is told (it was silent)
+    for text in ('base = "demo-small"\n[set]\n"projectile.mass" = 0.04\n'
+                 '[axes]\n"projectile.mass" = [0.05, 0.06]\n',
+                 'base = "demo-small"\n[set]\n"projectile.mass" = 0.04\n[lhs]\nsamples = 2\n'
+                 'ranges = {"projectile.mass" = [0.05, 0.06]}\n'):
+        bad.write_text(text)
+        with caplog.at_level(logging.WARNING, logger="emfabric"):
+            caplog.clear()
+            plan = load_study(bad)
+        assert all(0.05 <= c.scenario.projectile.mass <= 0.06 for c in plan.cases)
+        assert any("'projectile.mass' is both set in [set] and varied; the varied values "
+                   "replace the set one" in r.getMessage() for r in caplog.records)
     # a base that does not load says so without a [set] the file does not have
     bad.write_text('base = "nosuch"\n')
     with pytest.raises(StudyError) as info:

@@ -131,6 +131,10 @@ def sweep(
         raise typer.Exit(EXIT_INPUT) from None
     _verbose(verbose)
     hold_folder(out)  # one study at a time in a folder: exit 2 naming the holder
+    from emfabric.cli.run import warn
+
+    for w in plan.warnings:
+        warn(w)
     if plan.cases:
         _warn_actuation(plan.cases[0].scenario, "the study's first case")
     _stop_on_signals()

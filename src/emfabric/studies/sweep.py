@@ -114,12 +114,12 @@ class Study(BaseModel):
                 if any(value == earlier for earlier in values[:i]):
                     raise ValueError(f"axes.{key!r} has the value {value!r} twice; allowed: "
                                      "distinct values (each is a coordinate of results.nc)")
-        varied = set(self.axes) | (set(self.lhs.ranges) if self.lhs is not None else set())
-        both = sorted(varied & set(self.set))
-        if both:
-            raise ValueError(f"{both[0]!r} is both set in [set] and varied; allowed: one or "
-                             "the other (the varied values would replace the set one)")
         return self
+
+    def set_and_varied(self) -> list[str]:
+        """Keys both under [set] and varied by [axes] or [lhs] (the varied values win)."""
+        varied = set(self.axes) | (set(self.lhs.ranges) if self.lhs is not None else set())
+        return sorted(varied & set(self.set))
 
 
 @dataclass
@@ -142,6 +142,9 @@ class Plan:
     dims: list[str]
     coords: dict[str, list[Any]]
     cases: list[Case] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    """What in the study file is probably not what was meant (load_study; the command line
+    prints them)."""
 
 
 def case_key(text: str) -> str:
@@ -239,7 +242,13 @@ def load_study(path: str | Path) -> Plan:
     base_path = Path(study.base)
     if base_path.suffix == ".toml" and not base_path.is_absolute():
         base_path = path.parent / base_path
-    return plan_study(study, str(base_path) if base_path.suffix == ".toml" else study.base)
+    plan = plan_study(study, str(base_path) if base_path.suffix == ".toml" else study.base)
+    for key in study.set_and_varied():
+        plan.warnings.append(f"study file {str(path)!r}: {key!r} is both set in [set] and "
+                             "varied; the varied values replace the set one")
+    for w in plan.warnings:
+        logging.getLogger("emfabric").warning(w)
+    return plan
 
 
 def plan_study(study: Study, base: str) -> Plan:
