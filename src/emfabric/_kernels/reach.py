@@ -155,6 +155,7 @@ def fabric_reach(rows, ply_rows, x0, inv_mass, rest, keff, energy, e, limit, fir
             return math.inf
         bw = math.inf
         bf = math.inf
+        # (et stands in for the clamps of a yarn that does not hold the node: never read)
         wa = _point(x0, clamp[0, node]) if warp else et
         wb = _point(x0, clamp[1, node]) if warp else et
         fa = _point(x0, clamp[2, node]) if fill else et

@@ -305,17 +305,16 @@ class IntegratorBase(ABC):
         where = self._grid_of(node) if node >= 0 else ""
         first = ""
         if s_out is not None:
-            with np.errstate(invalid="ignore"):
-                for name, arr in (("position", s_out.node_x), ("velocity", s_out.node_v),
-                                  ("force", s_out.node_f)):
-                    bad = ~np.isfinite(arr).all(axis=0)
-                    if bad.any():
-                        k = int(np.argmax(bad))
-                        first = f"; the first non-finite {name} is node {k}'s{self._grid_of(k)}"
-                        break
-                else:
-                    if not np.isfinite(s_out.body).all():
-                        first = "; the projectile's state is non-finite"
+            for name, arr in (("position", s_out.node_x), ("velocity", s_out.node_v),
+                              ("force", s_out.node_f)):
+                bad = ~np.isfinite(arr).all(axis=0)
+                if bad.any():
+                    k = int(np.argmax(bad))
+                    first = f"; the first non-finite {name} is node {k}'s{self._grid_of(k)}"
+                    break
+            else:
+                if not np.isfinite(s_out.body).all():
+                    first = "; the projectile's state is non-finite"
         raise DivergenceError(
             f"diverged at t = {s_in.t:.6g} s, Δt = {dt:.3g} s: {why}; largest force "
             f"{fmax:.3g} N on node {node}{where} at "
