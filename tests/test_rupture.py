@@ -388,3 +388,30 @@ def test_held_nodes_are_the_pieces_joined_to_the_frame():
         assert held.sum() == expected
         if edges == "free":
             assert not held.reshape(9, 9)[:, :4].any()
+
+
+def test_a_rotated_brittle_ply_builds_and_strains_its_averages_at_its_own_rate():
+    """A pack whose second ply is turned by 30° carries, beyond the frame, lattice nodes of no
+    mass joined by segments of no stiffness: their averaging rate is 0 (no load, no average to
+    keep), where it once was 0/0 and the model refused to build ("non-finite
+    yarns.averaging_rate"). Every segment that carries load keeps 1/τ = √(k/m̄)/n."""
+    from emfabric.config.scenario import load_scenario
+    from emfabric.integrators import make_integrator
+
+    sc = load_scenario("km2-fsp", {"fabric.plies": 2, "fabric.ply_angles": [0.0, 30.0],
+                                   "fabric.nodes": [15, 15], "solver.end_time": 1e-6})
+    model = build_model(sc)
+    y, m = model.physics.yarns, model.nodes.mass
+    rate = y.averaging_rate
+    assert np.isfinite(rate).all()
+    loaded = y.stiffness > 0.0
+    assert (~loaded).any()  # the rotated ply's lattice outside the frame
+    n = sc.fabric.damage.strain_averaging
+    mbar = 0.5 * (m[y.ends[:, 0]] + m[y.ends[:, 1]])
+    np.testing.assert_allclose(rate[loaded], np.sqrt(y.stiffness[loaded] / mbar[loaded]) / n,
+                               rtol=1e-14)
+    assert (rate[~loaded] == 0.0).all()
+    s = initial_state(model)
+    out = s.copy()
+    make_integrator(model).step(s, out)
+    assert np.isfinite(out.seg_strain).all() and np.isfinite(out.node_x).all()

@@ -190,6 +190,19 @@ def test_extreme_numbers_are_refused_in_words(overrides, expected):
         build_model(load_scenario("paper-field", {"fabric.nodes": [10, 10], **overrides}))
 
 
+def test_a_non_finite_model_of_plain_values_is_not_blamed_on_one():
+    """A model that comes out non-finite from values of physical size is the builder's fault,
+    not the scenario's most extreme value (a rotated brittle ply once blamed the untouched
+    solver.dt_min = 1e-13): the error says so and names no key as the cause."""
+    from emfabric.sim.builder import extreme_value_error
+
+    err = extreme_value_error(load_scenario("demo-small"), "a non-finite yarns.area")
+    assert "no value of the scenario is extreme" in str(err) and "emfabric bug" in str(err)
+    err = extreme_value_error(load_scenario("demo-small", {"projectile.radius": 1e200}),
+                              "a non-finite body.inertia")
+    assert str(err).startswith("projectile.radius = 1e+200: building the model gives")
+
+
 def test_an_axis_is_a_direction_whatever_its_length():
     """projectile.axis = [0, 0, −1e200] is the nose pointing down, as [0, 0, −1] is (its
     length squared overflowed to a zero direction and a division by zero inside the step

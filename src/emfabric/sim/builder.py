@@ -143,10 +143,15 @@ def _averaging_rate(n: float, stiffness: np.ndarray, mass: np.ndarray,
                     ends: np.ndarray) -> np.ndarray:
     """Yarns.averaging_rate: each segment's 1/τ, τ = n·√(m̄/k), n times the time a wave takes to
     cross it (for a chain of equal nodes and segments, L0/c = √(m/k)), k its stiffness and m̄
-    the mean mass of its end nodes [1/s]; empty for n = 0 (the instantaneous stretch)."""
+    the mean mass of its end nodes [1/s]; empty for n = 0 (the instantaneous stretch). 0 for
+    a segment of no stiffness between massless nodes: a rotated ply's lattice outside the frame
+    (_ply), which carries no load."""
     if n == 0.0:
         return np.zeros(0)
-    return np.sqrt(stiffness / _end_mass(mass, ends)) / n
+    m = _end_mass(mass, ends)
+    out = np.zeros_like(stiffness)
+    np.divide(stiffness, m, out=out, where=m > 0.0)
+    return np.sqrt(out) / n
 
 
 def _assemble(scenario: Scenario) -> Model:
@@ -525,12 +530,24 @@ def _listed(value):
     return [_listed(v) for v in value] if isinstance(value, tuple) else value
 
 
+PHYSICAL_DECADES = 30
+"""extreme_value_error blames the scenario's most extreme value only beyond this many decades
+from 1: the built-in scenarios' values lie within 1e-13 … 1e11, and a square, product or volume
+of values within 1e±30 stays far from overflow."""
+
+
 def extreme_value_error(scenario: Scenario, problem: str) -> ScenarioError:
     """The error for a model that is not finite (`problem`: what went wrong). Every number of a
     scenario is finite (validated), so one is too extreme for what is computed from it; named is
     the most extreme one, counted in decades away from 1 (the defaults lie within 1e-13 … 1e11,
     and only a value some 100 decades out overflows a square, a product or a volume)."""
-    key, value, _ = max(_numbers(scenario, ""), key=lambda item: item[2])
+    key, value, decades = max(_numbers(scenario, ""), key=lambda item: item[2])
+    if decades <= PHYSICAL_DECADES:
+        # nothing the user gave is extreme: the model's own arithmetic failed
+        return ScenarioError(
+            f"building the model gives {problem}, although no value of the scenario is extreme "
+            f"(the most extreme: {key} = {_shown(value)}): an emfabric bug; please report it "
+            "with the output of `emfabric validate SCENARIO --show`")
     return ScenarioError(
         f"{key} = {_shown(value)}: building the model gives {problem}, and this is the "
         f"scenario's most extreme value; allowed: a value of physical size (every quantity "
