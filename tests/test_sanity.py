@@ -264,3 +264,18 @@ def test_a_nil_stable_step_says_which_limit(tmp_path):
             run(sc, tmp_path / "r")
     finally:
         log.setLevel(level)
+
+
+def test_a_step_below_dt_min_in_a_strong_field_names_the_gyration():
+    """In 1e6 T a charged node of demo-small turns about B so fast that courant × 0.1/ω_c is
+    below dt_min: the run ends diverged at t = 0 naming the gyration limit and what sets it, not
+    the yarns' stability limit."""
+    from emfabric.integrators import DivergenceError
+    from emfabric.runner.loop import run
+
+    sc = load_scenario("demo-small", {"fabric.nodes": [8, 8], "solver.end_time": 2e-6,
+                                      "field.B": [1e6, 0.0, 0.0], "solver.dt_min": 1e-12})
+    with pytest.raises(DivergenceError, match=r"the gyration limit .* a charged node may turn "
+                                              r"about B .* check the field and the nodes' "
+                                              r"charge and mass"):
+        run(sc)

@@ -52,6 +52,7 @@ from emfabric._kernels.records import (
     DIAG_RECEDE_MAX,
     DIAG_STRAIN,
     DIAG_STRETCH,
+    GYRATION_TURN,
     MATERIAL_FUNG,
     ROW_COUNT,
     ROW_FILL,
@@ -620,7 +621,8 @@ def _rotate_row(nb, count, inv_mass, charge, uni, sourced, nf, x, tau, v, vat, b
     cyclotron frequency is exact, |v| kept to round-off. t = (q B tau/(2m))·tan(y)/y with y =
     θ/2, the ratio from tan_ratio where every node's y² < TAN_SERIES_LIMIT (branch-free, so
     vectorised), else each node by Rodrigues's formula (rodrigues: any angle). Clamped
-    nodes (1/m = 0) and uncharged ones are left exactly as they are.
+    nodes (1/m = 0) and uncharged ones are left exactly as they are. Returns the largest y²
+    of the row.
 
     Inlined (Numba IR), as _row_force, and given arrays and numbers, not records: Numba
     references every array of a record bound to a function's argument on entry and releases
@@ -646,7 +648,7 @@ def _rotate_row(nb, count, inv_mass, charge, uni, sourced, nf, x, tau, v, vat, b
     # the largest apart (_buf_max: a maximum in the loop above would not vectorise)
     big = _buf_max(buf, ROW_PROJECTION, count)
     if big == 0.0:
-        return
+        return big
     if big < TAN_SERIES_LIMIT:
         for i in range(count):
             u = uint64(i)
@@ -667,7 +669,7 @@ def _rotate_row(nb, count, inv_mass, charge, uni, sourced, nf, x, tau, v, vat, b
             v[r, w] = vx + (uy * sz - uz * sy)
             v[r + 1, w] = vy + (uz * sx - ux * sz)
             v[r + 2, w] = vz + (ux * sy - uy * sx)
-        return
+        return big
     for i in range(count):
         if buf[ROW_PROJECTION, uint64(i)] == 0.0:
             continue
@@ -678,6 +680,7 @@ def _rotate_row(nb, count, inv_mass, charge, uni, sourced, nf, x, tau, v, vat, b
         v[r, w] = rv[0]
         v[r + 1, w] = rv[1]
         v[r + 2, w] = rv[2]
+    return big
 
 
 @njit(cache=True, inline="always")
@@ -789,7 +792,8 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
     B(x_{n+1}, t1) for h/2, then v_{n+1} = v⁺ + h/(2m) f; sout.f = f + q v_{n+1} × B and sout.e
     = E. Per row into work.row_sums: the half kick's field and gravity work, the projection
     term of the contact candidates (explicit.central_step), Σ|v_{n+1}|², the largest
-    2 Σ k_t/m of its nodes (the Gershgorin bound of ω² of explicit.stable_step) and its share
+    2 Σ k_t/m of its nodes (the Gershgorin bound of ω² of explicit.stable_step) or, where
+    larger, their gyration's (2 ω_c/GYRATION_TURN)² (records.SUM_STIFFNESS), and its share
     of the fabric diagnostics of the end state (records.SUM_DIAG; the frame in work.frame):
     the nodes and segments are in the cache here, so the history record costs no pass of its
     own."""
@@ -807,6 +811,7 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
     flag, xbuf, v_pre = work.flag, work.xbuf, work.v_pre
     grav = (fld.gravity[0], fld.gravity[1], fld.gravity[2])
     half = 0.5 * dt
+    gyration = 64.0 / (GYRATION_TURN * GYRATION_TURN) * inv_dt * inv_dt
     x1, v1 = sout.x, sout.v
     zref = nodes.x0
     frame = work.frame
@@ -844,7 +849,10 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
                     fy = buf[rf + c, i] - (charge[n] * ee[c] + mass[n] * grav[c])
                     proj += fy * (x1[c, n] - xbuf[c, n] - half * (v1[c, n] - v_pre[c, n]))
         sums[SUM_PROJECTION, j] = proj
-        _rotate_row(nb, nx, inv_mass, charge, uni, sourced, nf, x1, half, v1, (0, nb), buf)
+        big = _rotate_row(nb, nx, inv_mass, charge, uni, sourced, nf, x1, half, v1, (0, nb), buf)
+        # the gyration's ω² beside the yarns' (records.GYRATION_TURN): big is the row's largest
+        # (ω_c h/4)², turned for h/2, so (2 ω_c/GYRATION_TURN)² = big · gyration
+        sums[SUM_STIFFNESS, j] = max(sums[SUM_STIFFNESS, j], gyration * big)
         # the second half kick in short loops over few arrays, so that each vectorises (one loop
         # writing v1, fo, eo and the row buffer did not): v_{n+1} into the buffer's rotation
         # rows (free once _rotate_row is done) with the half kick's field and gravity work and

@@ -864,7 +864,8 @@ class SolverSpec(_Section):
     target_iterations, …), else "central-difference"."""
     courant: Annotated[float, Field(gt=0.0, le=1.0)] = 0.25
     """central-difference: the fraction of the stable step (2/ω_max, ω_max² ≤ max 2Σk_t/m at the
-    current stretches) taken [-]."""
+    current stretches, or (20 ω_c)² where a charged node's cyclotron frequency ω_c = |qB|/m is
+    higher: it turns about B by at most 0.1 × courant rad a step) taken [-]."""
     bulk_viscosity: Annotated[float, Field(ge=0.0, le=1.0)] | None = None
     """central-difference: q of the yarns' linear bulk viscosity [-]: a taut segment carries,
     besides its elastic tension, q·√(k m)·L̇ (k its axial stiffness 𝔼A0/L0, m the mass of its

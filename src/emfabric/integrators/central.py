@@ -2,7 +2,8 @@
 
 Δt = min(courant × the stability limit of the current state (× √(1 + q²) − q with the yarns'
 bulk viscosity q), the no-tunnelling limit, dt_max, what is left to the end), recomputed every
-step: the limit 2/ω_max follows the yarns as they stretch or break (explicit.stable_step), the
+step: the limit 2/ω_max follows the yarns as they stretch or break (explicit.stable_step) and
+the charged nodes' gyration in B (records.GYRATION_TURN: ω ≥ 2 ω_c/GYRATION_TURN), the
 no-tunnelling limit keeps the body from moving more than a quarter of its radius relative to
 the fabric per step (explicit.travel_step). A step whose body rotation does not converge or
 that leaves a free node inside the body is retried at half the step; a non-finite step is a
@@ -26,7 +27,13 @@ from emfabric._kernels.explicit import (
     central_step,
     stable_step,
 )
-from emfabric._kernels.records import make_work, ply_box_size
+from emfabric._kernels.fields import fill_node_fields
+from emfabric._kernels.records import (
+    GYRATION_TURN,
+    REGION_HALF_SPACE,
+    make_work,
+    ply_box_size,
+)
 from emfabric.integrators.base import IntegratorBase, StepInfo
 from emfabric.sim.fastcall import Direct
 from emfabric.sim.model import Model
@@ -137,15 +144,43 @@ class CentralDifference(IntegratorBase):
         travel: the stability and no-tunnelling limits if known (the step kernel computes both
         at its end state), else explicit.stable_step and contact.travel_step."""
         if crit is None:
-            crit = self._stable(None, self.physics, state.node_x, state.seg_alpha, self.scratch)
+            crit = min(self._stable(None, self.physics, state.node_x, state.seg_alpha,
+                                    self.scratch), self._gyration_limit(state))
         if travel is None:
             travel = self._travel(None, self.physics, state.node_x, state.node_v, state.body)
         return min(self.courant * self.viscous_factor * crit, travel, self.dt_max)
 
+    def _gyration_limit(self, state: State) -> float:
+        """GYRATION_TURN/ω_c [s], ω_c = |q B|/m the largest cyclotron frequency of the free
+        charged nodes at the state (the step kernel takes the same limit from its own rotation
+        at the end state: nodes._kick_block); inf without one."""
+        nodes, fld = self.physics.nodes, self.physics.field
+        qm = np.abs(nodes.charge) * nodes.inv_mass
+        if not np.any(qm > 0.0):
+            return math.inf
+        x = state.node_x
+        if fld.loops is None and fld.map_axes is None and fld.grid_values is None:
+            # uniform, or confined to the half-space below z0 (fields.field_at)
+            inside = (np.ones(x.shape[1], dtype=bool) if fld.region != REGION_HALF_SPACE
+                      else x[2] < fld.z0)
+            b = np.where(inside, float(np.sqrt(np.dot(fld.B, fld.B))), 0.0)
+        else:
+            nf = np.empty((6, x.shape[1]))
+            fill_node_fields(fld, x, state.node_v, 0.0, state.t, nf)
+            b = np.sqrt(nf[3] ** 2 + nf[4] ** 2 + nf[5] ** 2)
+        wc = float(np.max(qm * b))
+        return GYRATION_TURN / wc if wc > 0.0 else math.inf
+
     def _which_limit(self, state: State) -> str:
         """Which limit sets the step at this state, in words (for a step below dt_min)."""
         crit = self._stable(None, self.physics, state.node_x, state.seg_alpha, self.scratch)
+        gyration = self._gyration_limit(state)
         travel = self._travel(None, self.physics, state.node_x, state.node_v, state.body)
+        if gyration < crit and self.courant * self.viscous_factor * gyration <= travel:
+            return (f"the gyration limit {gyration:.3g} s × courant {self.courant:g}: a charged "
+                    f"node may turn about B by {GYRATION_TURN:g} rad × courant a step (its "
+                    "cyclotron frequency |q B|/m: check the field and the nodes' charge and "
+                    "mass)")
         if self.courant * self.viscous_factor * crit <= travel:
             return (f"the stability limit 2/ω_max = {crit:.3g} s × courant {self.courant:g} "
                     + (f"× {self.viscous_factor:.3g} for the bulk viscosity "
