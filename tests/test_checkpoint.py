@@ -334,3 +334,24 @@ def test_patient_steps_resume_bit_for_bit(tmp_path):
     assert int(xr.open_dataset(part / "history.nc").iterations[-1]) > k_d
     assert resume(part).status == "complete"
     _same_files(part, full)
+
+
+def test_a_diverged_run_is_not_resumed(tmp_path):
+    """A run that diverged (here: a projectile mass of 5e-324 kg, whose inertia underflows to 0)
+    keeps a checkpoint of the state it diverged from or in; resuming one diverged again, one
+    step later each time, adding a record of a rejected state. It is refused instead, naming
+    the divergence, and the files stay as they were."""
+    from emfabric.integrators import DivergenceError
+
+    sc = load_scenario("demo-small", {"fabric.nodes": [8, 8], "solver.end_time": 5e-5,
+                                      "field.B": [0.0, 0.0, 0.0], "output.paraview": False,
+                                      "projectile.mass": 5e-324})
+    with pytest.raises(DivergenceError):
+        run(sc, tmp_path)
+    before = (tmp_path / "history.nc").read_bytes()
+    with pytest.raises(CheckpointError, match="diverged .*nothing to resume"):
+        resume(tmp_path)
+    assert (tmp_path / "history.nc").read_bytes() == before
+    r = subprocess.run([sys.executable, "-m", "emfabric", "run", "--resume", str(tmp_path)],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and "nothing to resume" in r.stderr and "Traceback" not in r.stderr

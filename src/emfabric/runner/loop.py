@@ -157,6 +157,13 @@ def _resume(out: Path, scenario: Scenario | None, progress: ProgressFn | None,
                 f"the run in {out} is complete (end_time): nothing to resume; to continue it "
                 f"past its end, give a later end time: emfabric run --resume {out} --set "
                 f"{END_TIME}=T")
+    if status is not None and status[0] == "diverged":
+        # its checkpoint holds the state it diverged from (or in): the same scenario diverges
+        # again, a step further each time it is resumed
+        raise CheckpointError(
+            f"the run in {out} diverged ({status[1]}): nothing to resume; run the scenario "
+            f"again with what the message points to changed (a smaller solver.courant, or the "
+            f"value it names), into a new folder or this one")
     try:
         rows = read_history_rows(history, pos.history_rows, model.ply_count)
         times = snapshot_times(out / "snapshots.nc", pos.snapshots)
