@@ -25,6 +25,10 @@ from conftest import make
     ({"fabric.size": [254.0, 254.0]}, "did you type mm as m? (254 mm = 0.254 m)"),
     ({"fabric.size": [254.0, 254.0]}, "can fall between the nodes"),
     ({"projectile.position": [0.5, 0.0, 0.05]}, "it will miss the fabric"),
+    # aimed at the clamped edge of the 0.254 m sheet: the frame does not stop it
+    ({"projectile.position": [0.127, 0.0, 0.05]}, "reaches the clamped edge x = 0.127 m"),
+    ({"projectile.position": [0.0, -0.11, 0.05], "projectile.velocity": [0.0, -50.0, -250.0]},
+     "reaches the clamped edge y = -0.127 m"),
     ({"projectile.velocity": [0.0, 0.0, 250.0]}, "leads away from the sheet"),
     ({"projectile.velocity": [0.0, 0.0, -2e4]}, "far outside ballistic impacts"),
     # 1000 times the paper's 0.128 kg/m²: the wave speed falls by √1000 to 242 m/s, in range
@@ -279,3 +283,37 @@ def test_a_step_below_dt_min_in_a_strong_field_names_the_gyration():
                                               r"about B .* check the field and the nodes' "
                                               r"charge and mass"):
         run(sc)
+
+
+@pytest.mark.parametrize("name, overrides, between", [
+    # the .22 FSP (5.56 mm across) aimed at the middle of a 30 × 30 sheet (8.76 mm cells, no
+    # yarn through the middle) and of a 31 × 31 one (a node there)
+    ("fsp", {"fabric.nodes": [30, 30]}, True),
+    ("fsp", {"fabric.nodes": [31, 31]}, False),
+    # a 6 mm cylinder nose first through a 13.4 mm cell, and the same lying across the yarns
+    ("demo-small", {"fabric.nodes": [20, 20], "projectile.shape": "cylinder",
+                    "projectile.radius": 0.003, "projectile.length": 0.02}, True),
+    ("demo-small", {"fabric.nodes": [20, 20], "projectile.shape": "cylinder",
+                    "projectile.radius": 0.003, "projectile.length": 0.02,
+                    "projectile.axis": [1.0, 0.0, 0.0]}, False),
+])
+def test_a_projectile_that_fits_between_the_yarns_is_warned_and_does_pass(name, overrides,
+                                                                          between):
+    """A body whose silhouette along its flight fits inside one cell of the lumped network,
+    between its yarn lines, passes through the sheet without a contact, reported "never
+    touched" (a new user's coarse what-if: the grid's parity decided whether the projectile
+    struck at all). It is warned about before the run with the grid that would catch it; a
+    body that meets a yarn line is not, and does touch."""
+    sc = load_scenario(name, {**overrides, "solver.end_time": 3e-5, "output.paraview": False})
+    model = build_model(sc)
+    warned = [w for w in pre_run_warnings(model) if "fits between the yarns" in w]
+    assert bool(warned) == between, pre_run_warnings(model)
+    from emfabric import run
+
+    h = run(sc).history
+    assert (int(h.contact_nodes.max()) + int(h.contact_segments.max()) > 0) != between
+    if between:
+        # the grid it names would catch it: a yarn line inside its silhouette
+        need = [int(n) for n in warned[0].split("fabric.nodes ≥ [")[1].split("]")[0].split(",")]
+        finer = build_model(load_scenario(name, {**overrides, "fabric.nodes": need}))
+        assert not any("fits between the yarns" in w for w in pre_run_warnings(finer))

@@ -245,6 +245,14 @@ def pre_run_warnings(model) -> list[str]:
                            f"({hit[0]:.4g}, {hit[1]:.4g}) m, off the sheet ({lo[0]:.4g} … "
                            f"{hi[0]:.4g}, {lo[1]:.4g} … {hi[1]:.4g} m): it will miss the "
                            f"fabric (check projectile.position and velocity)")
+            elif sc is not None:
+                between = _between_yarns(model, sc, hit, v, 0 if c[2] > z_top else -1)
+                if between is not None:
+                    out.append(between)
+                if sc.fabric.edges == "clamped":
+                    edge = _at_the_frame(model, hit, v, lo, hi)
+                    if edge is not None:
+                        out.append(edge)
     elif pr is not None:
         out.append("projectile.velocity = [0, 0, 0]: the projectile is at rest and touches "
                    "the sheet only if the field or gravity drives it there")
@@ -254,12 +262,80 @@ def pre_run_warnings(model) -> list[str]:
         lx, ly = sc.fabric.size
         h = max(lx / (nx - 1), ly / (ny - 1))
         segments = bool(model.contact.segments)
-        if not segments and across < h * math.sqrt(2.0):
+        if not segments and across < h * math.sqrt(2.0) and not any(
+                "between the yarns" in w for w in out):
             out.append(f"the projectile ({across:.4g} m across) is smaller than the diagonal "
                        f"of a cell of the network ({h:.4g} m spacing) and only nodes meet it "
                        f"(contact.segments = false): it can fall between the nodes; use more "
                        f"fabric.nodes or contact.segments = true")
     return out
+
+
+def _silhouette(model, hit, v, e) -> tuple[float, float]:
+    """The projectile's extent along the in-plane unit vector e (world, (3,)) seen along its
+    velocity v, where its centre's path crosses the sheet's plane at `hit` (x, y): the body
+    projected along v onto the plane, as (least, largest) e·x [m]. Its extent along e is the
+    body's support function in d = e − (e·v / v_z) ẑ (the projection's adjoint applied to e)."""
+    geo, frame = model.geometry, model.body.frame
+    d = e - (e @ v / v[2]) * np.array([0.0, 0.0, 1.0])
+    centre = float(e[:2] @ hit)
+    return centre - geo.extent(frame @ -d), centre + geo.extent(frame @ d)
+
+
+def _at_the_frame(model, hit, v, lo, hi) -> str | None:
+    """The warning for a projectile whose silhouette (_silhouette) reaches the clamped edge of
+    the sheet (lo, hi: its x, y extent), else None: clamped nodes are fixed points, not an
+    obstacle, and a body that meets them passes through the frame while the yarns they hold
+    stretch without bound (the energy balance then fails: a run aimed 2.5 cm off the edge of
+    demo-small ended with clamped nodes deep inside the sphere and −7.6 J of balance error)."""
+    for k, axis in enumerate("xy"):
+        e = np.zeros(3)
+        e[k] = 1.0
+        least, largest = _silhouette(model, hit, v, e)
+        edge = lo[k] if least <= lo[k] else hi[k] if largest >= hi[k] else None
+        if edge is not None:
+            room = 0.5 * (largest - least)
+            return (f"the projectile reaches the clamped edge {axis} = {edge:.4g} m: it crosses "
+                    f"the sheet at x, y = ({hit[0]:.4g}, {hit[1]:.4g}) m and is "
+                    f"{largest - least:.4g} m across {axis} there; the frame is not an "
+                    f"obstacle in this model (its clamped nodes are fixed points the projectile "
+                    f"passes through, stretching the yarns they hold without bound): aim it at "
+                    f"least {room:.4g} m from the edges, or use fabric.edges = \"free\"")
+    return None
+
+
+def _between_yarns(model, sc, hit, v, ply: int) -> str | None:
+    """The warning for a projectile whose silhouette, seen along its velocity v, fits between
+    the yarns of the ply it meets first (ply 0 from above, the last from below) where its
+    centre's path crosses that ply's plane at `hit` (x, y): the lumped network has yarns only
+    along its grid lines, so such a body passes through the sheet without touching one (a
+    fragment narrower than the cell of a coarse grid; the grid's parity decides it when the
+    body is aimed at the middle). None when it meets a yarn line."""
+    p = ply % model.ply_count
+    a, b = int(model.nodes.ply_nodes[p]), int(model.nodes.ply_nodes[p + 1])
+    x0 = model.nodes.x0[:, a:b][:, model.nodes.mass[a:b] > 0]
+    if x0.shape[1] == 0 or v[2] == 0.0:
+        return None
+    angles = sc.fabric.ply_angles
+    theta = math.radians(angles[p]) if angles else 0.0
+    nx, ny = model.ply_grid(p)
+    spacing = (sc.fabric.size[0] / (nx - 1), sc.fabric.size[1] / (ny - 1))
+    covered = []
+    for e in ((math.cos(theta), math.sin(theta), 0.0), (-math.sin(theta), math.cos(theta), 0.0)):
+        e = np.array(e)
+        span = _silhouette(model, hit, v, e)
+        lines = np.unique(np.round(e[:2] @ x0[:2], 9))
+        if np.any((lines >= span[0]) & (lines <= span[1])):
+            return None  # it meets the yarns along this family's lines
+        covered.append(span[1] - span[0])
+    need = [int(math.ceil(size / width)) + 1 for size, width in zip(sc.fabric.size, covered,
+                                                                      strict=True)]
+    return (f"the projectile fits between the yarns of the network: seen along its velocity it "
+            f"is {covered[0]:.4g} × {covered[1]:.4g} m where it crosses the "
+            f"{'top' if ply == 0 else 'bottom'} ply at x, y = ({hit[0]:.4g}, {hit[1]:.4g}) m, "
+            f"inside one cell of {spacing[0]:.4g} × {spacing[1]:.4g} m, so it passes through that "
+            f"ply without touching a yarn (the lumped network has yarns only along its grid "
+            f"lines); use fabric.nodes ≥ [{need[0]}, {need[1]}] or aim it at a yarn")
 
 
 def _snapshots(sc) -> float:
