@@ -2,6 +2,7 @@
 mistake, a refusal for an output volume nobody wants."""
 
 import logging
+import math
 import tomllib
 
 import pytest
@@ -51,6 +52,8 @@ from conftest import make
     ({"projectile.charges": [{"position": [0.5, 0.0, 0.0], "charge": 1e-6}]},
      "lies 0.5 m from the centre of mass, outside the projectile (it reaches 0.02635 m)"),
     # a solver key the chosen integrator does not read (it ran without it, silently)
+    ({"projectile.position": [0.0, 0.0, 0.05], "projectile.gap": 0.01},
+     "projectile.gap = 0.01 m is not used"),
     ({"solver.integrator": "central-difference", "solver.safety": 0.5},
      "solver.safety = 0.5: read only by the φ-scheme"),
     ({"solver.integrator": "phi", "solver.courant": 0.5},
@@ -185,6 +188,11 @@ def test_cli_prints_a_typing_mistake_as_a_warning(tmp_path, command):
      r"speed of light, 299792458 m/s"),
     ({"fabric.velocity": [3e8, 0, 0]}, r"fabric.velocity = .*: a speed of 3e\+08 m/s"),
     ({"fabric.velocity": [2.2e8, 2.2e8, 0]}, r"a speed of 3.111e\+08 m/s"),
+    # the sphere (radius 0.02635 m) spun so that its surface would outrun light
+    ({"projectile.angular_velocity": [0, 0, 1e12]},
+     r"projectile.angular_velocity = .*: its surface would start at up to 2.635e\+10 m/s"),
+    # principal moments no rigid body has (3 > 1 + 1)
+    ({"projectile.principal_inertia": [1.0, 1.0, 3.0]}, r"no rigid body has these moments"),
 ])
 def test_extreme_numbers_are_refused_in_words(overrides, expected):
     """Numbers far outside any physical run (found by fuzzing the scenario keys) are refused
@@ -317,3 +325,13 @@ def test_a_projectile_that_fits_between_the_yarns_is_warned_and_does_pass(name, 
         need = [int(n) for n in warned[0].split("fabric.nodes ≥ [")[1].split("]")[0].split(",")]
         finer = build_model(load_scenario(name, {**overrides, "fabric.nodes": need}))
         assert not any("fits between the yarns" in w for w in pre_run_warnings(finer))
+
+
+def test_a_limit_passed_by_a_little_is_shown_apart():
+    """A diverged run's message shows the value and the limit it passed with the digits that
+    tell them apart ("fabric deflection 180 m beyond the plausible 180 m" said nothing)."""
+    from emfabric.sim.diagnostics import _apart
+
+    assert _apart(180.02, 180.0) == ("180.02", "180")
+    assert _apart(2.5e3, 180.0) == ("2.5e+03", "180")
+    assert _apart(math.nextafter(180.0, 1e3), 180.0)[0] != "180"

@@ -617,6 +617,13 @@ class Projectile(_Section):
         if self.shape == "sphere" and self.length is not None:
             raise ValueError(f'length = {self.length} is not used by shape = "sphere"; allowed '
                              f'with "ogive", "cylinder", "fsp"')
+        if self.principal_inertia is not None:
+            moments = sorted(self.principal_inertia)
+            if moments[2] > (moments[0] + moments[1]) * (1.0 + 1e-12):
+                raise ValueError(
+                    f"principal_inertia = {list(self.principal_inertia)}: no rigid body has "
+                    f"these moments (each is at most the sum of the other two: {moments[2]:g} > "
+                    f"{moments[0]:g} + {moments[1]:g}); allowed: I1 + I2 ≥ I3 in every order")
         return self
 
 

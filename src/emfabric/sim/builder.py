@@ -30,7 +30,7 @@ from emfabric._kernels.records import (
     pack_tables,
 )
 from emfabric._kernels.shapes import SHAPES
-from emfabric.config.scenario import Scenario, ScenarioError
+from emfabric.config.scenario import LIGHT_SPEED, Scenario, ScenarioError
 from emfabric.sim.geometry import initial_pose
 from emfabric.sim.model import Model, Options
 from emfabric.sources.build import build_field, nodes_outside_map, one_type
@@ -185,6 +185,17 @@ def _assemble(scenario: Scenario) -> Model:
     has_body = pr.shape in SHAPES
     pose = initial_pose(pr)
     geo, frame = pose.geometry, pose.frame
+    if has_body:
+        # Newtonian mechanics: no point of the body may start as fast as light (the velocity
+        # alone is checked with the scenario: LIGHT_SPEED)
+        surface = (math.hypot(*pose.angular_velocity) * float(geo.bound)
+                   + math.hypot(*pose.velocity))
+        if not surface < LIGHT_SPEED:
+            raise ScenarioError(
+                f"projectile.angular_velocity = {list(pr.angular_velocity)}: its surface would "
+                f"start at up to {surface:.4g} m/s (|ω| × {float(geo.bound):.4g} m + |v|); "
+                f"allowed: below the speed of light, {LIGHT_SPEED:.9g} m/s (the model is "
+                f"Newtonian)")
     charge_pos = np.array([c.position for c in pr.charges], dtype=float).reshape(-1, 3)
     charge_q = np.array([c.charge for c in pr.charges], dtype=float)
     segments = scenario.contact.segments
@@ -586,7 +597,9 @@ def check_geometry(model: Model, projectile) -> None:
                  f"projectile.gap = {sc.gap}")
         raise ScenarioError(
             f"{where}: the projectile (centre {[round(float(v), 6) for v in c]} m, reaching "
-            f"{below:.6g} m below it) overlaps the fabric at t = 0 ({inside} nodes inside it); "
+            f"{below:.6g} m below it) overlaps the fabric at t = 0 ("
+            + (f"{inside} node{'s' if inside > 1 else ''} inside it" if inside else
+               "the sheet's plane cuts it") + "); "
             f"allowed: a start clear of the sheet, e.g. centre z ≥ {below:.6g} m + gap above it"
         )
 

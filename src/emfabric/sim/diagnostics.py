@@ -347,6 +347,16 @@ def limits(model: Model) -> Limits:
     return Limits(SPEED_FACTOR * fastest, SIZE_FACTOR * size)
 
 
+def _apart(value: float, limit: float) -> tuple[str, str]:
+    """value and limit (value > limit) with the fewest significant digits, at least 3, that
+    show them apart ("180.02 beyond 180", not "180 beyond 180")."""
+    for digits in range(3, 18):
+        a, b = f"{value:.{digits}g}", f"{limit:.{digits}g}"
+        if a != b:
+            return a, b
+    return f"{value!r}", f"{limit!r}"
+
+
 def check_plausible(model: Model, state: State, row: np.ndarray, lim: Limits) -> str | None:
     """Why the state just recorded is not physical (non-finite values, an energy balance error
     beyond ENERGY_BALANCE_FRACTION of the energy put in, motion beyond the limits), else None."""
@@ -367,13 +377,15 @@ def check_plausible(model: Model, state: State, row: np.ndarray, lim: Limits) ->
         v = math.hypot(*state.body_v.tolist())
         x = math.hypot(*state.body_x.tolist())
         if v > lim.speed:
-            return f"projectile speed {v:.3g} m/s beyond the plausible {lim.speed:.3g} m/s"
+            a, b = _apart(v, lim.speed)
+            return f"projectile speed {a} m/s beyond the plausible {b} m/s"
         if x > lim.distance:
-            return (f"projectile {x:.3g} m from the origin, beyond the plausible "
-                    f"{lim.distance:.3g} m")
+            a, b = _apart(x, lim.distance)
+            return f"projectile {a} m from the origin, beyond the plausible {b} m"
     defl = row.item(COL_DEFLECTION)
     if defl > lim.distance:
-        return f"fabric deflection {defl:.3g} m beyond the plausible {lim.distance:.3g} m"
+        a, b = _apart(defl, lim.distance)
+        return f"fabric deflection {a} m beyond the plausible {b} m"
     stretch = row.item(COL_STRETCH)
     if stretch > STRETCH_LIMIT:
         return f"yarn stretch U = {stretch:.3g} beyond the plausible {STRETCH_LIMIT:g}"

@@ -82,6 +82,12 @@ def _time_varying(fld) -> bool:
     return bool(cur.size) and bool(np.any(cur[:, 0] != WAVE_CONSTANT))
 
 
+def _magnitudes(v: np.ndarray) -> np.ndarray:
+    """|v| of each row of v (N, 3), without the overflow of squaring a component near the
+    largest double (a field of 1e300 V/m is 1e300, not inf)."""
+    return np.hypot(np.hypot(v[:, 0], v[:, 1]), v[:, 2])
+
+
 def _peak_fields(model) -> tuple[float, float, float, float, float]:
     """Largest |B| [T] and |E| [V/m] at the nodes at t = 0, and the largest over the run's
     sampled times with the time [s] of the largest |B|."""
@@ -89,15 +95,15 @@ def _peak_fields(model) -> tuple[float, float, float, float, float]:
     fld = model.field
     e, b = fields_at(fld, pts, 0.0)
     with np.errstate(over="ignore"):  # a field beyond 1e154 is reported as inf, not warned
-        b0 = float(np.sqrt((b * b).sum(axis=1)).max()) if pts.size else 0.0
-        e0 = float(np.sqrt((e * e).sum(axis=1)).max()) if pts.size else 0.0
+        b0 = float(_magnitudes(b).max()) if pts.size else 0.0
+        e0 = float(_magnitudes(e).max()) if pts.size else 0.0
         b_peak, e_peak, t_peak = b0, e0, 0.0
         end = float(model.options.end_time)
         if pts.size and _time_varying(fld) and end > 0.0:
             for t in np.linspace(0.0, end, FIELD_SAMPLES)[1:]:
                 e, b = fields_at(fld, pts, float(t))
-                bt = float(np.sqrt((b * b).sum(axis=1)).max())
-                e_peak = max(e_peak, float(np.sqrt((e * e).sum(axis=1)).max()))
+                bt = float(_magnitudes(b).max())
+                e_peak = max(e_peak, float(_magnitudes(e).max()))
                 if bt > b_peak:
                     b_peak, t_peak = bt, float(t)
     return b0, e0, b_peak, e_peak, t_peak

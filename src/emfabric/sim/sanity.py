@@ -211,6 +211,10 @@ def pre_run_warnings(model) -> list[str]:
                    f"({side:.4g} m): it strikes the frame, not the fabric"
                    + (f"; check projectile.radius = {radius:g} m (mm as m?)" if radius > 0.1
                       else ""))
+    if pr is not None and pr.position is not None and pr.gap != type(pr)().gap:
+        out.append(f"projectile.gap = {pr.gap:g} m is not used: projectile.position = "
+                   f"{list(pr.position)} m places the centre (gap places the body that far "
+                   f"above the sheet's centre when position is not given)")
     if pr is not None:
         # a point charge the projectile carries sits on or inside it (the paper's four sit on
         # its surface, section 6); one beyond its reach is a unit or frame mistake
