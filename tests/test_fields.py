@@ -512,15 +512,23 @@ def test_node_field_pass_takes_the_predicted_position():
 
 
 def test_grid_and_exact_runs_agree():
-    """The same impact with the loops from the grid and evaluated exactly: the projectile's
-    velocity and spin agree to the grid's tolerance (not bit for bit)."""
+    """The same impact with the loops from the grid and evaluated exactly: the change of the
+    projectile's velocity and its spin agree to the grid's tolerance (field.grid_tolerance,
+    1e-3; not bit for bit): measured 5e-5 and 3e-4 of their largest component. The
+    transverse velocity the field gives (−0.06 m/s along y) differs by ~1.3e-6 m/s, which a
+    bound of 1e-6 m/s passed only while both runs took the yarns' step (on this coarse sheet
+    near the wire the gyration limit, which follows the field's largest value, now sets it,
+    1.7e-4 apart in the two; at any fixed step from 2e-7 to 3.2e-7 s the difference is the
+    same 1.2–1.3e-6 m/s)."""
     over = {"fabric.nodes": [15, 15], "solver.end_time": 1.5e-5, "field.B": [0, 0, 0],
             "field.sources": [{"kind": "loop", "centre": [0.0, 0.0, -0.05],
                                "normal": [1.0, 0.0, 0.0], "radius": 0.2, "current": 1.6e4}]}
     a = run(make(**over)).state.body
     b = run(make(**over, **{"field.grid": False})).state.body
     from emfabric._kernels.records import BODY_V, BODY_W
-    assert np.allclose(a[BODY_V], b[BODY_V], rtol=1e-6, atol=1e-6)
+    v0 = np.array(make(**over).projectile.velocity)
+    dva, dvb = a[BODY_V] - v0, b[BODY_V] - v0
+    assert np.allclose(dva, dvb, rtol=1e-3, atol=1e-3 * np.abs(dvb).max())
     assert np.allclose(a[BODY_W], b[BODY_W], rtol=1e-3, atol=1e-3 * np.abs(b[BODY_W]).max())
     assert np.abs(b[BODY_W]).max() > 0.0
 
