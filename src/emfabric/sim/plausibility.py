@@ -94,7 +94,7 @@ def _peak_fields(model) -> tuple[float, float, float, float, float]:
     pts = np.ascontiguousarray(np.asarray(model.nodes.x0, dtype=float).T)
     fld = model.field
     e, b = fields_at(fld, pts, 0.0)
-    with np.errstate(over="ignore"):  # a field beyond 1e154 is reported as inf, not warned
+    with np.errstate(over="ignore"):  # a field evaluated as inf is reported as inf, not warned
         b0 = float(_magnitudes(b).max()) if pts.size else 0.0
         e0 = float(_magnitudes(e).max()) if pts.size else 0.0
         b_peak, e_peak, t_peak = b0, e0, 0.0

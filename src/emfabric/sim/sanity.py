@@ -213,8 +213,8 @@ def pre_run_warnings(model) -> list[str]:
                       else ""))
     if pr is not None and pr.position is not None and pr.gap != type(pr)().gap:
         out.append(f"projectile.gap = {pr.gap:g} m is not used: projectile.position = "
-                   f"{list(pr.position)} m places the centre (gap places the body that far "
-                   f"above the sheet's centre when position is not given)")
+                   f"{list(pr.position)} m places the centre (gap is the clearance below the "
+                   f"projectile, over the sheet's centre, when position is not given)")
     if pr is not None:
         # a point charge the projectile carries sits on or inside it (the paper's four sit on
         # its surface, section 6); one beyond its reach is a unit or frame mistake
