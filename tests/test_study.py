@@ -376,6 +376,31 @@ def test_design_field_brackets_the_target_tilt(tmp_path):
     assert out["estimate_eq54"] > 0 and (tmp_path / "design.png").is_file()
 
 
+def test_design_field_stops_going_up_once_the_tilt_falls_with_the_field():
+    """A target out of reach where the tilt peaks and then falls as the field grows (a new
+    user's 1 rad in 20 µs on an 11 × 11 demo sheet: 0.158 rad at 558 ×, then 0.133, 0.087, …):
+    the search doubled the field for twelve rounds, each run slower than the last (about 170
+    days to go). It stops once the two strongest complete probes lie beyond the largest tilt
+    and fall; a probe that did not complete, or a tilt still growing, does not stop it."""
+    import math
+
+    from emfabric.studies.design import Probe, _falling_above_best
+
+    def probes(pairs, status="complete"):
+        return {s: Probe(s, t, status) for s, t in pairs}
+
+    seen = probes([(279.0, 0.112), (558.0, 0.158), (1116.0, 0.133), (2233.0, 0.087)])
+    assert _falling_above_best(seen) == (558.0, 2233.0)
+    assert _falling_above_best(probes([(279.0, 0.112), (558.0, 0.158), (1116.0, 0.133)])) \
+        is None  # one probe beyond the peak: not yet
+    assert _falling_above_best(probes([(1.0, 0.1), (2.0, 0.2), (4.0, 0.3), (8.0, 0.4)])) is None
+    # beyond the peak but rising again: keep going
+    assert _falling_above_best(probes([(1.0, 0.3), (2.0, 0.1), (4.0, 0.2)])) is None
+    # the falling probes must have completed (a diverged run's tilt is NaN)
+    falling = {**seen, 4466.0: Probe(4466.0, math.nan, "diverged")}
+    assert _falling_above_best(falling) == (558.0, 2233.0)
+
+
 # --- ballistic limit --------------------------------------------------------------------------
 
 def test_lambert_jonas_fit_recovers_known_parameters():

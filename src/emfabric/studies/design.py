@@ -90,6 +90,22 @@ class Probe:
     status: str
 
 
+def _falling_above_best(probes: dict) -> tuple[float, float] | None:
+    """(the scale of the largest tilt, the largest scale) when the two largest scales of the
+    complete probes both lie above the one of the largest tilt and their tilts fall with the
+    scale: going further up only lowers the tilt (and in a strong field every doubling doubles
+    a run's steps: docs/theory.md §4.1, the gyration limit). Else None."""
+    ok = sorted(x for x, p in probes.items() if p.status == "complete"
+                and math.isfinite(p.tilt))
+    if len(ok) < 3:
+        return None
+    best = max(ok, key=lambda x: probes[x].tilt)
+    a, b = ok[-2], ok[-1]
+    if a > best and probes[b].tilt <= probes[a].tilt < probes[best].tilt:
+        return best, b
+    return None
+
+
 def design_field(scenario: Scenario, tilt: float, by: float, out, *,
                  workers: int | None = None, scheduler: str | None = None,
                  threads: int | None = None, rel_tol: float = 0.02,
@@ -179,6 +195,16 @@ def design_field(scenario: Scenario, tilt: float, by: float, out, *,
                         + ("" if best is None else f"; the largest tilt of a complete run: "
                            f"{probes[best].tilt:.3g} rad at {best:.3g} ×")
                         + f"; the probes are in {out / 'cases'}")
+                falling = _falling_above_best(probes)
+                if falling is not None:
+                    best, last = falling
+                    raise StudyError(
+                        f"no bracket for a tilt of {tilt} rad by {by} s: the largest tilt, "
+                        f"{probes[best].tilt:.3g} rad at {best:.3g} × the scenario's field, "
+                        f"falls as the field grows beyond it ({probes[last].tilt:.3g} rad at "
+                        f"{last:.3g} ×): a stronger field does not reach the target (each "
+                        f"doubling would only double the run's steps); the probes are in "
+                        f"{out / 'cases'}")
                 measure([top * 2.0 ** (k + 1) for k in range(width)])
         if hi is None:
             seen = [p.tilt for p in probes.values() if math.isfinite(p.tilt)]
