@@ -243,6 +243,14 @@ def test_study_file_errors_say_what(tmp_path, caplog):
          "axes.'fabric.material.seed' has the value 1 twice; allowed: distinct values"),
         ('base = "demo-small"\n[axes]\n"projectile.mass" = [0.05, 0.050]\n',
          "axes.'projectile.mass' has the value 0.05 twice"),
+        # one case, no axis: results.nc had nothing to be drawn against (plot's traceback)
+        ('base = "demo-small"\n[set]\n"projectile.mass" = 0.04\n',
+         "no [axes] or [lhs]: a study varies at least one key over its cases"),
+        # a quoted "yes" was taken as true, 0 as false
+        ('base = "demo-small"\nkeep_histories = "yes"\n[axes]\n"projectile.mass" = [0.05]\n',
+         "keep_histories = 'yes': allowed: true or false"),
+        ('base = "demo-small"\nkeep_histories = 0\n[axes]\n"projectile.mass" = [0.05]\n',
+         "keep_histories = 0: allowed: true or false"),
     ]:
         bad.write_text(text)
         with pytest.raises(StudyError) as info:
@@ -263,12 +271,39 @@ def test_study_file_errors_say_what(tmp_path, caplog):
         assert all(0.05 <= c.scenario.projectile.mass <= 0.06 for c in plan.cases)
         assert any("'projectile.mass' is both set in [set] and varied; the varied values "
                    "replace the set one" in r.getMessage() for r in caplog.records)
+    # a Latin hypercube over a key of integers: the range is named, not a drawn 5.277…
+    bad.write_text('base = "demo-small"\n[lhs]\nsamples = 2\nseed = 1\n'
+                   'ranges = {"fabric.material.seed" = [1, 10]}\n')
+    with pytest.raises(StudyError, match=r"lhs.ranges.'fabric.material.seed' = \[1.0, 10.0\]: "
+                                         r"its middle is refused .*needs an integer"):
+        load_study(bad)
     # a base that does not load says so without a [set] the file does not have
-    bad.write_text('base = "nosuch"\n')
+    bad.write_text('base = "nosuch"\n[axes]\n"projectile.mass" = [0.05]\n')
     with pytest.raises(StudyError) as info:
         load_study(bad)
     assert str(info.value).startswith("base = 'nosuch': no built-in scenario")
 
+
+
+def test_keeping_histories_later_runs_the_cases_again_to_keep_them(tmp_path):
+    """A study run with keep_histories = false, then with true: its stored cases were reused,
+    so no run folder was ever written while study.json said they were kept. The cases without
+    a run folder run again; once kept, they are reused."""
+    from emfabric.studies.sweep import sweep
+
+    text = ('base = "demo-small"\nkeep_histories = {}\n[set]\n"fabric.nodes" = [9, 9]\n'
+            '"solver.end_time" = 5e-6\n[axes]\n"projectile.mass" = [0.02, 0.03]\n')
+    study = tmp_path / "s.toml"
+    study.write_text(text.format("false"))
+    first = sweep(load_study(study), tmp_path / "out", workers=1)
+    assert first.ran == 2 and not (tmp_path / "out" / "runs").exists()
+    study.write_text(text.format("true"))
+    plan = load_study(study)
+    second = sweep(plan, tmp_path / "out", workers=1)
+    assert second.ran == 2 and second.reused == 0
+    assert all((tmp_path / "out" / "runs" / c.key / "history.nc").is_file() for c in plan.cases)
+    third = sweep(plan, tmp_path / "out", workers=1)
+    assert third.ran == 0 and third.reused == 2
 
 
 def test_study_keys_may_be_toml_dotted_keys(tmp_path):
@@ -560,6 +595,9 @@ def test_ballistic_limit_end_to_end(tmp_path):
                           "--json"], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
     out = json.loads(res.stdout)
+    # every key docs/studies.md lists for --json; v50 null without --seeds
+    assert set(out) == {"v_bl", "v_bl_bracket", "lambert_jonas", "v50", "runs", "non_monotone"}
+    assert out["v50"] is None
     lo, hi = out["v_bl_bracket"]
     assert hi - lo <= tol and out["v_bl"] == pytest.approx(0.5 * (lo + hi), rel=1e-12)
     full = json.loads((tmp_path / "ballistic.json").read_text())

@@ -335,7 +335,8 @@ def ballistic_limit(
         console.print(f"[yellow]note:[/] {note}", highlight=False, soft_wrap=True)
     if json_summary:
         keep = ("v_bl", "v_bl_bracket", "lambert_jonas", "v50", "runs", "non_monotone")
-        emit(jsontext.dumps({k: res[k] for k in keep if k in res}))
+        # every key docs/studies.md lists, v50 null without --seeds (as ballistic.nc's)
+        emit(jsontext.dumps({k: res.get(k) for k in keep}))
     else:
         lj = res["lambert_jonas"]
         console.print(f"V_BL = {res['v_bl']:.4g} m/s (bracket {res['v_bl_bracket'][0]:.4g} – "

@@ -52,7 +52,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    StrictBool,
+    ValidationError,
+    model_validator,
+)
 
 from emfabric.config.scenario import (
     Scenario,
@@ -101,12 +108,15 @@ class Study(BaseModel):
     set: dict[str, Any] = {}
     axes: dict[str, list[Any]] = {}
     lhs: _Lhs | None = None
-    keep_histories: bool = False
+    keep_histories: StrictBool = False
 
     @model_validator(mode="after")
     def _axes_or_lhs(self) -> Study:
         if self.lhs is not None and self.axes:
             raise ValueError("give [axes] or [lhs], not both")
+        if self.lhs is None and not self.axes:
+            raise ValueError("no [axes] or [lhs]: a study varies at least one key over its "
+                             "cases (for one run of a scenario: emfabric run)")
         for key, values in self.axes.items():
             if not values:
                 raise ValueError(f"axes.{key!r} is empty; allowed: a list of values")
@@ -268,6 +278,16 @@ def plan_study(study: Study, base: str) -> Plan:
             if not (math.isfinite(lo) and math.isfinite(hi) and hi >= lo):
                 raise StudyError(f"lhs.ranges.{key!r} = [{lo}, {hi}]: allowed: finite low ≤ "
                                  f"high")
+            # the range itself, before any sample: a key that takes integers (a seed, a ply
+            # count) was refused case by case, naming a drawn 5.277… the file does not hold
+            try:
+                apply_overrides(scenario, {key: 0.5 * (lo + hi)})
+            except ScenarioError as err:
+                why = " ".join(str(err).split())  # one line
+                raise StudyError(f"lhs.ranges.{key!r} = [{lo}, {hi}]: its middle is refused "
+                                 f"({why}); allowed: a key of real values over a range it "
+                                 f"takes (a Latin hypercube draws real numbers: vary a key of "
+                                 f"integers under [axes])") from None
             # one point in each of n equal strata, the strata shuffled per key
             u = (rng.permutation(n) + rng.random(n)) / n
             columns[key] = [float(lo + (hi - lo) * x) for x in u]
@@ -565,7 +585,11 @@ def _sweep(plan: Plan, out: Path, workers: int | None, scheduler: str | None,
 
     text = _study_text(plan)  # the study as run, beside its results
     write_atomic(out / "study.json", lambda tmp: tmp.write_text(text, encoding="utf-8"))
-    todo = [c for c in plan.cases if read_case(out, c) is None]
+    # a case kept without its run folder (the study once ran with keep_histories = false)
+    # runs again to keep it
+    keep = plan.study.keep_histories
+    todo = [c for c in plan.cases if read_case(out, c) is None
+            or (keep and not (out / "runs" / c.key).is_dir())]
     reused = len(plan.cases) - len(todo)
     if todo:
         client, cluster, per_case = connect(workers, scheduler, threads)

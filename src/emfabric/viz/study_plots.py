@@ -437,6 +437,10 @@ def study_figures(study_dir: str | Path, out: str | Path | None = None) -> list[
     files: list[Path] = []
     with xr.open_dataset(path) as ds:
         ds = ds.load()
+    if not [d for d in ds.dims if d != "xyz"]:
+        # a study with neither [axes] nor [lhs] (refused since 2026-12-07): one case, no axis
+        raise FileNotFoundError(f"{path} has no study axis to draw against (one case, no "
+                                f"[axes] or [lhs]); its case's numbers are in {path}")
     for name in PLOTTED:
         fig = metric_figure(ds, name)
         if fig is not None:
