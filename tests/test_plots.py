@@ -302,3 +302,16 @@ def test_package_import_of_plots_loads_no_numba():
     code = "import emfabric.viz.plots, sys; assert 'numba' not in sys.modules"
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
+
+
+def test_a_study_folder_without_axes_is_one_line_not_a_traceback(tmp_path):
+    """results.nc of a study with neither [axes] nor [lhs] (one case, accepted before
+    2026-12-07) has nothing to draw against: `emfabric plot` said IndexError in a traceback;
+    now exit 2 and one line naming the file."""
+    xr.Dataset({"residual_speed": ((), 240.0), "final_angular_velocity": (("xyz",),
+                                                                          [1.0, 0.0, 0.0])},
+               coords={"xyz": ["x", "y", "z"]}).to_netcdf(tmp_path / "results.nc")
+    r = subprocess.run([sys.executable, "-m", "emfabric", "plot", str(tmp_path)],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert "has no study axis to draw against" in r.stderr
