@@ -585,11 +585,16 @@ def _sweep(plan: Plan, out: Path, workers: int | None, scheduler: str | None,
 
     text = _study_text(plan)  # the study as run, beside its results
     write_atomic(out / "study.json", lambda tmp: tmp.write_text(text, encoding="utf-8"))
-    # a case kept without its run folder (the study once ran with keep_histories = false)
-    # runs again to keep it
+    # a case stored without its run folder (the study once ran with keep_histories = false)
+    # runs again to keep it; not one that failed before its run wrote anything
     keep = plan.study.keep_histories
-    todo = [c for c in plan.cases if read_case(out, c) is None
-            or (keep and not (out / "runs" / c.key).is_dir())]
+
+    def stored(case: Case) -> bool:
+        rec = read_case(out, case)
+        return rec is not None and (not keep or (out / "runs" / case.key).is_dir()
+                                    or rec.get("status") == "failed")
+
+    todo = [c for c in plan.cases if not stored(c)]
     reused = len(plan.cases) - len(todo)
     if todo:
         client, cluster, per_case = connect(workers, scheduler, threads)
