@@ -112,11 +112,11 @@ def test_the_step_resolves_the_gyration():
 
 
 def test_a_spin_induced_in_a_strong_field_is_converged_at_the_default_step():
-    """In 5 T the charged sheet's nodes gyrate at ω_c = 6e6 rad/s, 2 rad in the step the yarns
-    alone allow on this 14 × 14 sheet: the sphere's induced ω_x there was 78 % of its peak off
-    the run at a sixteenth of the step (the error is first order in ω_c Δt, docs/theory.md
-    §4.1). With the gyration limit the default run is within 2 % of the run at a quarter of
-    its step over the whole contact."""
+    """In 5 T the charged sheet's nodes gyrate at ω_c = 6e6 rad/s, about 3 rad in the step the
+    yarns alone allow on this 14 × 14 sheet: without the gyration limit the sphere's induced
+    ω_x was 84 % of its peak off the run at a quarter of the step (the error is first order in
+    ω_c Δt, docs/theory.md §4.1). With it the default run is within 2 % of the run at a
+    quarter of its step over the whole contact."""
     base = {"fabric.nodes": [14, 14], "field.B": [5.0, 0.0, 0.0], "solver.end_time": 3e-5}
     a = run(load_scenario("demo-small", base)).history
     b = run(load_scenario("demo-small", {**base, "solver.courant": 0.0625})).history
