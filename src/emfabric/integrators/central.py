@@ -28,12 +28,7 @@ from emfabric._kernels.explicit import (
     stable_step,
 )
 from emfabric._kernels.fields import fill_node_fields
-from emfabric._kernels.records import (
-    GYRATION_TURN,
-    REGION_HALF_SPACE,
-    make_work,
-    ply_box_size,
-)
+from emfabric._kernels.records import GYRATION_TURN, make_work, ply_box_size
 from emfabric.integrators.base import IntegratorBase, StepInfo
 from emfabric.sim.fastcall import Direct
 from emfabric.sim.model import Model
@@ -154,21 +149,15 @@ class CentralDifference(IntegratorBase):
         """GYRATION_TURN/ω_c [s], ω_c = |q B|/m the largest cyclotron frequency of the free
         charged nodes at the state (the step kernel takes the same limit from its own rotation
         at the end state: nodes._kick_block); inf without one."""
-        nodes, fld = self.physics.nodes, self.physics.field
+        nodes = self.physics.nodes
         qm = np.abs(nodes.charge) * nodes.inv_mass
         if not np.any(qm > 0.0):
             return math.inf
-        x = state.node_x
-        if fld.loops is None and fld.map_axes is None and fld.grid_values is None:
-            # uniform, or confined to the half-space below z0 (fields.field_at)
-            inside = (np.ones(x.shape[1], dtype=bool) if fld.region != REGION_HALF_SPACE
-                      else x[2] < fld.z0)
-            b = np.where(inside, float(np.sqrt(np.dot(fld.B, fld.B))), 0.0)
-        else:
-            nf = np.empty((6, x.shape[1]))
-            fill_node_fields(fld, x, state.node_v, 0.0, state.t, nf)
-            b = np.sqrt(nf[3] ** 2 + nf[4] ** 2 + nf[5] ** 2)
-        wc = float(np.max(qm * b))
+        # field_at at every node, whatever the field (the kernel every run's initial forces
+        # call: sim.state.update_forces)
+        nf = np.empty((6, state.node_x.shape[1]))
+        fill_node_fields(self.physics.field, state.node_x, state.node_v, 0.0, state.t, nf)
+        wc = float(np.max(qm * np.sqrt(nf[3] ** 2 + nf[4] ** 2 + nf[5] ** 2)))
         return GYRATION_TURN / wc if wc > 0.0 else math.inf
 
     def _which_limit(self, state: State) -> str:
