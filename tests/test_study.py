@@ -2,6 +2,7 @@
 
 import json
 import logging
+import math
 import subprocess
 import sys
 import time
@@ -553,6 +554,65 @@ def test_seeded_shots_widen_until_both_outcomes_are_in():
     with pytest.raises(StudyError, match=r"every one of the 66 decided seeded shots from "
                                          r"23\.7 to 120 m/s perforated"):
         seeded_shots(fire, sc, 100.0, 2)
+
+
+def _fake_cases(monkeypatch, limit, failing):
+    """studies.ballistic's shots decided without running: through at `limit` m/s or faster,
+    "diverged" (undecided) for speeds in the open interval `failing`."""
+    import emfabric.studies.sweep as sweep
+
+    def outcome(case):
+        v = abs(case.scenario.projectile.velocity[2])
+        if failing[0] < v < failing[1]:
+            return {"status": "diverged", "perforated": -1}
+        through = v >= limit
+        return {"status": "complete", "perforated": int(through),
+                "residual_speed": math.sqrt(max(v * v - limit * limit, 0.0)) if through
+                else 0.0}
+
+    monkeypatch.setattr(sweep, "connect", lambda *a: (None, None, 1))
+    monkeypatch.setattr(sweep, "release", lambda *a: None)
+    monkeypatch.setattr(sweep, "run_cases", lambda *a, **k: None)
+    monkeypatch.setattr(sweep, "read_case", lambda out, case: outcome(case))
+
+
+def test_a_bisection_stopped_by_failed_shots_goes_on_from_the_shots_above(monkeypatch,
+                                                                            tmp_path):
+    """Failed shots inside the bracket stop the k-section early; the shots then fired above
+    V_BL fall inside the wide bracket, and what they decide narrows it: the k-section goes on
+    from there to the tolerance and brackets the limit (130 m/s; shots at 104-126 m/s
+    diverge). Before, V_BL came out as the middle of the wide bracket, 116.7 m/s, below a shot
+    that perforated."""
+    from emfabric.config.scenario import load_scenario
+    from emfabric.studies.ballistic import ballistic_limit, unresolved_bracket
+
+    _fake_cases(monkeypatch, 130.0, (104.0, 126.0))
+    sc = load_scenario("rupture", {"projectile.velocity": [0.0, 0.0, -150.0]})
+    res = ballistic_limit(sc, tmp_path, tolerance=2.0)
+    lo, hi = res["v_bl_bracket"]
+    assert hi - lo <= 2.0 and lo < 130.0 <= hi
+    assert res["unresolved"] == [] and unresolved_bracket(res) is None
+    assert any(r["status"] == "diverged" for r in res["shots"])
+
+
+def test_a_bracket_failed_shots_leave_wide_is_reported(monkeypatch, tmp_path):
+    """Where every shot inside the bracket fails, V_BL is known only to the bracket: the
+    result lists those shots (`unresolved`), unresolved_bracket says so with their count and
+    status, and no decided shot lies inside the bracket."""
+    from emfabric.config.scenario import load_scenario
+    from emfabric.studies.ballistic import ballistic_limit, unresolved_bracket
+
+    _fake_cases(monkeypatch, 130.0, (104.0, 136.0))
+    sc = load_scenario("rupture", {"projectile.velocity": [0.0, 0.0, -150.0]})
+    res = ballistic_limit(sc, tmp_path, tolerance=2.0)
+    lo, hi = res["v_bl_bracket"]
+    assert lo <= 105.0 and hi >= 135.0 and res["v_bl"] == 0.5 * (lo + hi)
+    inside = [r for r in res["shots"] if lo < r["speed"] < hi]
+    assert inside and all(r["status"] == "diverged" for r in inside)
+    assert [u["speed"] for u in res["unresolved"]] == sorted(r["speed"] for r in inside)
+    note = unresolved_bracket(res)
+    assert note is not None and f"the {len(inside)} shots inside it decided nothing" in note
+    assert f"({len(inside)} diverged:" in note and "--tolerance 2" in note
 
 
 def _direct_shot(speed):

@@ -288,7 +288,11 @@ def ballistic_limit(
     """V_BL of the model by bracketing and bisecting the striking speed, the Lambert-Jonas fit
     of the residual speeds above it, and with --seeds, V50 and its spread (runs on Dask)."""
     from emfabric.studies.ballistic import ballistic_limit as search
-    from emfabric.studies.ballistic import v_bl_outside_v50, write_outputs
+    from emfabric.studies.ballistic import (
+        unresolved_bracket,
+        v_bl_outside_v50,
+        write_outputs,
+    )
     from emfabric.studies.sweep import StudyError
 
     sc = load_or_exit(scenario, set_)
@@ -333,8 +337,10 @@ def ballistic_limit(
     note = v_bl_outside_v50(res)
     if note:
         console.print(f"[yellow]note:[/] {note}", highlight=False, soft_wrap=True)
+    unresolved = unresolved_bracket(res)
     if json_summary:
-        keep = ("v_bl", "v_bl_bracket", "lambert_jonas", "v50", "runs", "non_monotone")
+        keep = ("v_bl", "v_bl_bracket", "lambert_jonas", "v50", "runs", "non_monotone") + (
+            ("unresolved",) if res.get("unresolved") else ())
         # every key docs/studies.md lists, v50 null without --seeds (as ballistic.nc's)
         emit(jsontext.dumps({k: res.get(k) for k in keep}))
     else:
@@ -353,3 +359,7 @@ def ballistic_limit(
             else:
                 console.print(f"V50 = {v['v50']:.4g} m/s, 95 % [{v['ci95'][0]:.4g}, "
                               f"{v['ci95'][1]:.4g}], σ = {v['sigma']:.3g} m/s")
+    if unresolved:
+        # the result is written and printed, but it is not the limit to the tolerance asked
+        error(f"{unresolved} ({out})")
+        raise typer.Exit(EXIT_FAILED)

@@ -210,26 +210,51 @@ def ballistic_limit(scenario: Scenario, out, *, seeds: int = 0, tolerance: float
                              + (f" ({undecided} shots were still in contact at end_time or "
                                 f"did not complete: a longer solver.end_time decides them)"
                                 if undecided else ""))
-        rounds = 0
-        while hi - lo > tolerance and rounds < 4 * max_rounds:
-            new = [lo + (hi - lo) * (i + 1) / (width + 1) for i in range(width)]
-            before = (lo, hi)
-            for r in fire([(s, None, shot(scenario, s)) for s in new]):
-                if r["perforated"] == 1:
-                    hi = min(hi, r["speed"])
+
+        def narrow(lo: float, hi: float) -> tuple[float, float]:
+            """k-section of the bracket to the tolerance, or until a round decides nothing
+            (its shots failed or were still in contact at end_time)."""
+            rounds = 0
+            while hi - lo > tolerance and rounds < 4 * max_rounds:
+                new = [lo + (hi - lo) * (i + 1) / (width + 1) for i in range(width)]
+                before = (lo, hi)
+                fire([(s, None, shot(scenario, s)) for s in new])
+                lo, hi = bracket(lo, hi)
+                rounds += 1
+                if (lo, hi) == before:
+                    break
+            return lo, hi
+
+        def bracket(lo: float, hi: float) -> tuple[float, float]:
+            """The bracket every decided shot so far bounds: the slowest perforating one, and
+            the fastest stopped one below it."""
+            hi = min([hi] + [r["speed"] for r in shots if r["seed"] is None
+                             and r["perforated"] == 1])
             lo = max([lo] + [r["speed"] for r in shots if r["seed"] is None
                              and r["perforated"] == 0 and r["speed"] < hi])
-            rounds += 1
-            if (lo, hi) == before:  # the shots inside decided nothing (failed runs)
-                break
+            return lo, hi
+
+        lo, hi = narrow(lo, hi)
         v_bl = 0.5 * (lo + hi)
         fire([(f * v_bl, None, shot(scenario, f * v_bl)) for f in SPEEDS_ABOVE])
+        # a bisection that stopped early (failed shots inside its bracket) left the bracket
+        # wide enough for the shots above V_BL to fall inside it: what they decided narrows it,
+        # and the k-section goes on from there
+        if bracket(lo, hi) != (lo, hi):
+            lo, hi = narrow(*bracket(lo, hi))
+        v_bl = 0.5 * (lo + hi)
         pts = [(r["speed"], r["residual_speed"]) for r in shots
                if r["seed"] is None and r["perforated"] == 1 and r["speed"] >= hi
                and math.isfinite(r["residual_speed"])]
         lj = fit_lambert_jonas([p[0] for p in pts], [p[1] for p in pts], v_bl)
         result: dict[str, Any] = {"v_bl": v_bl, "v_bl_bracket": [lo, hi],
                                   "tolerance": tolerance, "lambert_jonas": lj}
+        # a bisection stopped early (the shots inside the bracket decided nothing): those
+        # shots, which unresolved_bracket reports; empty where the bracket is within tolerance
+        result["unresolved"] = [] if hi - lo <= tolerance else [
+            {"speed": r["speed"], "status": r["status"]} for r in
+            sorted(shots, key=lambda r: r["speed"])
+            if r["seed"] is None and r["perforated"] == -1 and lo < r["speed"] < hi]
         if seeds > 0:
             result["seeds"] = seeds
             try:
@@ -293,6 +318,28 @@ def seeded_shots(fire, scenario: Scenario, v_bl: float,
             f"{max(speeds):.4g} m/s {'perforated' if through else 'was stopped'}")
     raise StudyError(f"V50: {what}, the deterministic V_BL being {v_bl:.4g} m/s; "
                      "a V50 needs shots of both outcomes")
+
+
+def unresolved_bracket(res: dict[str, Any]) -> str | None:
+    """What to tell a user whose bisection stopped before its bracket was narrower than the
+    tolerance, else None: the shots inside decided nothing (runs that diverged or failed, or
+    were still in contact at end_time), so V_BL is known only to the bracket."""
+    lo, hi = res["v_bl_bracket"]
+    tolerance = res.get("tolerance", math.inf)
+    if not hi - lo > tolerance:
+        return None
+    inside = res.get("unresolved") or []
+    counts: dict[str, int] = {}
+    for r in inside:
+        counts[r["status"]] = counts.get(r["status"], 0) + 1
+    what = ", ".join(f"{n} {st}" for st, n in sorted(counts.items()))
+    return (f"V_BL = {res['v_bl']:.4g} m/s is known only to its bracket {lo:.4g} – {hi:.4g} "
+            f"m/s, wider than --tolerance {tolerance:g} m/s: "
+            + (f"the {len(inside)} shots inside it decided nothing ({what}: "
+               + ", ".join(f"{r['speed']:.4g}" for r in inside) + " m/s)"
+               if inside else "the shots inside it decided nothing")
+            + "; see each shot's run in the cases (a longer solver.end_time decides shots "
+            "still in contact; a diverged one names its cause)")
 
 
 def v_bl_outside_v50(res: dict[str, Any]) -> str | None:
