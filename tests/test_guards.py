@@ -7,6 +7,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 import xarray as xr
 
@@ -226,6 +227,28 @@ def test_a_coarser_grid_is_the_same_fabric_by_default(tmp_path):
     assert "100 x 100 reference" in xr.open_dataset(tmp_path / "history.nc").attrs[
         "fabric_reference"]
     assert "100 x 100 reference" in res.summary["fabric"]
+
+
+def test_a_grid_of_another_aspect_keeps_each_family_s_stiffness_per_width():
+    """fabric.nodes = [30, 10] on the paper's square sheet (reference 100 × 100): a warp line
+    stands for the yarns between two warp lines, hy apart, a fill line for hx, so each family
+    keeps 𝔼A0 per unit width when A0 scales with the spacing across it (MODEL §1). With one
+    mean spacing for both, the warp was 0.66 × and the fill 2.1 × as stiff per unit width as
+    the paper's sheet, and a tension front ran along the warp at 5481 m/s, not 6890."""
+    paper = build_model(load_scenario("paper-field"))
+    odd = build_model(load_scenario("paper-field", {"fabric.nodes": [30, 10]}))
+    y0, y = paper.yarns, odd.yarns
+    area0 = y0.stiffness[0] * y0.rest_length[0] / y0.modulus[0]
+    size = load_scenario("paper-field").fabric.size
+    h0 = size[0] / 99
+    hx, hy = size[0] / 29, size[1] / 9
+    seg_area = y.stiffness * y.rest_length / y.modulus
+    warp = np.isclose(y.rest_length, hx, rtol=1e-12)
+    fill = np.isclose(y.rest_length, hy, rtol=1e-12)
+    assert warp.sum() == 29 * 10 and fill.sum() == 30 * 9
+    # 𝔼A0 per unit width across each family, as on the reference grid
+    assert np.allclose(seg_area[warp] / hy, area0 / h0, rtol=1e-12)
+    assert np.allclose(seg_area[fill] / hx, area0 / h0, rtol=1e-12)
 
 
 def test_full_disk_stops_the_run_naming_the_file(tmp_path, monkeypatch):

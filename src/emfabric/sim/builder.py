@@ -375,11 +375,8 @@ def _ply(scenario: Scenario, index: int) -> _Ply:
     area = np.pi * fab.yarn_radius**2
     charge = fab.charge_per_node
     if fab.rescale:
-        # same fabric at another resolution: stiffness per unit width and q/m kept
+        # same fabric at another resolution: q/m kept (the yarn area below)
         rnx, rny = fab.reference_nodes
-        ref_h = 0.5 * (lx / (rnx - 1) + ly / (rny - 1))
-        h = 0.5 * (hx + hy)
-        area *= h / ref_h
         charge *= mass / (fab.areal_density * lx * ly / (rnx * rny))
     node_mass = np.where(live, mass, 0.0)
     node_inv_mass = np.where(free, 1.0 / mass, 0.0)
@@ -402,21 +399,33 @@ def _ply(scenario: Scenario, index: int) -> _Ply:
                     and pack.ply[index].material.seed is not None)
     seed = mat.seed if index == 0 or own_seed else (mat.seed, index)
     modulus = base * _modulus_factors(ends.shape[0], mat.modulus_cv, seed)
-    stiffness = modulus * area / rest
+    warp = np.arange(ends.shape[0]) < warp_a.size
+    rnx, rny = fab.reference_nodes
+    if aligned and turns % 2:
+        rnx, rny = rny, rnx
+    # each family's spacing on the reference grid, along its own direction
+    ref_hx, ref_hy = (su / (rnx - 1), sv / (rny - 1)) if aligned else (
+        lx / (fab.reference_nodes[0] - 1), ly / (fab.reference_nodes[1] - 1))
+    ref_rest = np.where(warp, ref_hx, ref_hy)
+    if fab.rescale:
+        # same fabric at another resolution: each family's stiffness per unit width kept. A
+        # warp line stands for the yarns of the hy between two of them, a fill line for hx:
+        # A0 ← A0·hy/hy_ref along the warp, A0·hx/hx_ref along the fill (exactly 1 at the
+        # reference grid; the same factor for both where the grid keeps the reference's
+        # aspect, as every square grid of a square sheet does)
+        seg_area = area * np.where(warp, hy / ref_hy, hx / ref_hx)
+    else:
+        seg_area = np.full(ends.shape[0], area)
+    stiffness = modulus * seg_area / rest
     if not aligned:
         # clipped: a segment carries load where it has a free end (clamped frame) or joins two
         # nodes of the sheet (free edges)
         a, b = free[ends[:, 0]], free[ends[:, 1]]
         stiffness[~((a | b) if pack.edges == "clamped" else (a & b))] = 0.0
-    warp = np.arange(ends.shape[0]) < warp_a.size
-    rnx, rny = fab.reference_nodes
-    if aligned and turns % 2:
-        rnx, rny = rny, rnx
-    ref_rest = np.where(warp, su / (rnx - 1), sv / (rny - 1)) if aligned else np.where(
-        warp, lx / (fab.reference_nodes[0] - 1), ly / (fab.reference_nodes[1] - 1))
     fail2 = failure_stretches(fab, rest, ref_rest, seed)
     return _Ply((gx, gy), x0, node_mass, node_inv_mass, node_charge, node_v0, ends, rest,
-                modulus, stiffness, float(area), float(fab.yarn_radius), fail2, (hx, hy), cos,
+                modulus, stiffness, float(seg_area[0] if seg_area.size else area),
+                float(fab.yarn_radius), fail2, (hx, hy), cos,
                 sin)
 
 
