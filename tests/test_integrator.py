@@ -72,6 +72,27 @@ def test_magnetic_force_does_no_work():
     assert e1 / e2 > 3.0  # second order: halving Δt quarters the drift
 
 
+def test_backward_euler_dissipates_as_its_closed_form_and_runs():
+    """φ = 1 under a constant force from rest (a free, charged 3 × 3 sheet in uniform E, no
+    yarn stretched): v_n = naΔt and x_n = aΔt²n(n + 1)/2, so the balance error after n steps
+    is −1/(n + 1) of the field's work, −50 % after the first, at any Δt. That is the scheme's
+    own dissipation, not a divergence: the run completes (the energy guard counts only a gain
+    for φ > 1/2), where it was stopped as diverged at its first step."""
+    sc = fabric_only(**{"fabric.nodes": [3, 3], "fabric.size": [0.01, 0.01],
+                        "fabric.edges": "free", "fabric.charge_per_node": 1.0,
+                        "field.E": [0.0, 0.0, 1.0], "solver.integrator": "phi",
+                        "solver.phi": 1.0, "solver.adaptive": False, "solver.dt_max": 1e-6,
+                        "solver.dt_initial": 1e-6, "solver.end_time": 2e-5})
+    res = run(sc)
+    ds = res.history
+    assert ds.attrs["status"] == "complete"
+    n = np.rint(ds.time.values / 1e-6)
+    assert np.array_equal(n, np.arange(21))
+    work = ds.work_field.values[1:]
+    assert np.allclose(ds.energy_balance_error.values[1:], -work / (n[1:] + 1), rtol=1e-9)
+    assert work[0] > 0.0
+
+
 def test_step_factor_formula():
     """Φ_K of eq. 3.9 with ϖ_0 = 1: shrink when K_d is exceeded, grow when met early."""
     tol, kd, p = 1e-6, 6, 2.0
@@ -229,6 +250,24 @@ def test_dt_min_stops_with_a_clear_error():
     # the step it stopped at, in the message and on the error
     assert f"Δt = {info.value.dt:.3g} s" in msg and 0.0 < info.value.dt < 5e-7
     assert info.value.result.status == "diverged"
+
+
+def test_a_failed_step_names_a_free_node():
+    """The node a failed step names is the free node with the largest force: a clamped node's
+    force is a reaction that drives nothing. A clamped sheet in E = 100 V/m whose φ-step cannot
+    meet a tolerance below round-off (1e-13) named node 2, on the clamped edge j = 0, where
+    every charged node carries the same q E."""
+    sc = make(**{"fabric.nodes": [10, 10], "fabric.size": [0.1, 0.1],
+                 "projectile.shape": "none", "fabric.charge_per_node": 1.0,
+                 "fabric.material.modulus_cv": 0.0,
+                 "field.B": [0.0, 0.0, 0.0], "field.E": [0.0, 0.0, 100.0],
+                 "fabric.damage.rate": 0.0, "solver.integrator": "phi",
+                 "solver.adaptive": False, "solver.dt_max": 1.5e-8,
+                 "solver.tolerance": 1e-13, "solver.end_time": 3e-6})
+    with pytest.raises(DivergenceError) as info:
+        run(sc)
+    assert "largest force" in str(info.value)
+    assert build_model(sc).nodes.inv_mass[info.value.node] > 0
 
 
 def test_a_non_finite_step_says_where_it_went_non_finite():

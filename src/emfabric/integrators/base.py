@@ -296,10 +296,14 @@ class IntegratorBase(ABC):
                 + f"grid i={local % nx}, j={local // nx})")
 
     def fail(self, s_in: State, dt: float, why: str, s_out: State | None = None) -> None:
-        """Raise the DivergenceError of a step from s_in at Δt: when, why, the node with the
-        largest force, and with the step's failed result s_out where it first went non-finite
+        """Raise the DivergenceError of a step from s_in at Δt: when, why, the free node with
+        the largest force, and with the step's failed result s_out where it first went non-finite
         (a node's position, velocity or force, or the projectile's state)."""
         f = np.linalg.norm(s_in.node_f, axis=0)
+        # a clamped node's force drives nothing (its reaction): the free nodes' largest
+        free = self.model.nodes.inv_mass > 0
+        if free.any() and f.size:
+            f = np.where(free, f, -1.0)
         node = int(np.argmax(f)) if f.size else -1
         fmax = float(f[node]) if f.size else 0.0
         where = self._grid_of(node) if node >= 0 else ""
