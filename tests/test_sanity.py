@@ -23,6 +23,10 @@ from conftest import make
     ({"projectile.radius": 26.35}, "did you type mm as m? (26.35 mm = 0.02635 m)"),
     ({"projectile.radius": 26.35}, "larger than the sheet"),
     ({"projectile.mass": 37.0}, "did you type g as kg? (37 g = 0.037 kg)"),
+    # the .22 FSP's 1.1 g typed as kg: within the masses of projectiles, not of its volume
+    ({"projectile.shape": "fsp", "projectile.radius": 0.00278, "projectile.mass": 1.1},
+     "is a mean density of 8.49e+06 kg/m³, outside any solid's (10–23000 kg/m³); did you "
+     "type g as kg? (1.1 g = 0.0011 kg)"),
     ({"fabric.size": [254.0, 254.0]}, "did you type mm as m? (254 mm = 0.254 m)"),
     ({"fabric.size": [254.0, 254.0]}, "can fall between the nodes"),
     ({"projectile.position": [0.5, 0.0, 0.05]}, "it will miss the fabric"),

@@ -29,6 +29,9 @@ BALLISTIC_MASS = (1e-4, 10.0)
 """Projectile masses [kg] we do not warn about: a 0.1 g fragment to a 10 kg body."""
 BALLISTIC_SIZE = (2e-4, 0.5)
 """Projectile radii [m] we do not warn about."""
+PROJECTILE_DENSITY = (10.0, 23000.0)
+"""A projectile's mean density [kg/m³] we do not warn about: a rigid foam to osmium (22 590),
+denser than any penetrator (tungsten alloys ~18 000)."""
 SHEET_SIZE = (1e-3, 5.0)
 """Sheet sides [m] we do not warn about."""
 BALLISTIC_SPEED = (1.0, 5000.0)
@@ -116,10 +119,12 @@ def _datasheet_warnings(sc) -> list[str]:
     out: list[str] = []
     fab = sc.fabric
     plies = fab.plies
-    for p in range(plies):
+    # without per-ply tables every ply is the fabric: one warning, not one per ply
+    for p in range(plies if fab.ply else 1):
         ply = fab.ply_fabric(p) if fab.ply else fab
         at = f"fabric.ply[{p}]." if fab.ply else "fabric."
-        which = f"ply {p + 1}" if plies > 1 else "the fabric"
+        which = (f"ply {p + 1}" if fab.ply and plies > 1 else
+                 "each ply" if plies > 1 else "the fabric")
         tex, count = ply.yarn_linear_density, ply.thread_count
         if tex is not None and count is not None:
             yarns = straight_yarn_mass(tex, count)
@@ -205,6 +210,18 @@ def pre_run_warnings(model) -> list[str]:
         out.append(f"projectile.mass = {mass:g} kg is far outside ballistic projectiles "
                    f"({BALLISTIC_MASS[0]:g}–{BALLISTIC_MASS[1]:g} kg)"
                    + (f"; {hint}" if hint else "; fine for a driver of constant speed"))
+    if pr is not None and BALLISTIC_MASS[0] <= mass <= BALLISTIC_MASS[1]:
+        # within the range of projectiles, but not of this one's size: the mean density a
+        # solid of its shape would need (a .22 FSP of 1.1 g typed as 1.1 kg: 7e6 kg/m³)
+        volume = float(geo.volume)
+        density = mass / volume if volume > 0.0 else 0.0
+        if density > PROJECTILE_DENSITY[1] or 0.0 < density < PROJECTILE_DENSITY[0]:
+            hint = (_unit_hint(mass, "kg", "g", 1e-3) if density > PROJECTILE_DENSITY[1]
+                    else "")
+            out.append(f"projectile.mass = {mass:g} kg in a {pr.shape} of {volume:.3g} m³ "
+                       f"is a mean density of {density:.3g} kg/m³, outside any solid's "
+                       f"({PROJECTILE_DENSITY[0]:g}–{PROJECTILE_DENSITY[1]:g} kg/m³)"
+                       + (f"; {hint}" if hint else ""))
     across = 2.0 * float(geo.bound)
     if side > 0.0 and across > side:
         out.append(f"the projectile ({across:.4g} m across) is larger than the sheet "
