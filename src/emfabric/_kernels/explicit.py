@@ -351,6 +351,23 @@ def _travel_from_rows(phys, sums, ny, b_state):
     return travel_limit(phys, fastest, lo, hi, b_state)
 
 
+@njit(cache=True, _nrt=False)
+def _viscous_base(x0, x1, v, dt, base):
+    """base (the drifted positions on entry) = the positions the kick's viscous rate is taken
+    from (records.Work.visc_base): x0 where the node is where the drift put it, x1 − Δt v
+    (v: its velocity after the contact impulses) where contact placed it."""
+    for n in range(x1.shape[1]):
+        u = uint64(n)
+        if x1[0, u] == base[0, u] and x1[1, u] == base[1, u] and x1[2, u] == base[2, u]:
+            base[0, u] = x0[0, u]
+            base[1, u] = x0[1, u]
+            base[2, u] = x0[2, u]
+        else:
+            base[0, u] = x1[0, u] - dt * v[0, u]
+            base[1, u] = x1[1, u] - dt * v[1, u]
+            base[2, u] = x1[2, u] - dt * v[2, u]
+
+
 @njit(cache=True, nogil=True, _nrt=False)
 def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol, energy):
     """One central-difference step from sin (at t) to sout (at t + Δt): nodes, body, contact,
@@ -419,6 +436,9 @@ def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol
     w_grav = _sum_rows(sums[SUM_WORK_GRAVITY], ny)
     viscous = phys.yarns.damping.size > 0
     w_visc = _sum_rows(sums[SUM_WORK_VISCOUS], ny) if viscous else 0.0
+    if viscous:
+        # the drifted positions, against which _viscous_base tells the placed nodes
+        copy_into(work.visc_base, sout.x)
     contact = sout.contact
     for c in range(4):  # row by row: contiguous stores
         for n in range(contact.shape[1]):
@@ -509,6 +529,8 @@ def central_step(phys, sin, sout, work, rowbuf, threads, plies, segs, t, dt, tol
     w_ply = 0.0
     if plies is not None:
         d_ply, w_ply = ply_contact(phys, sin, sout.x, sout.v, work, half, sout.contact[3])
+    if viscous:
+        _viscous_base(sin.x, sout.x, sout.v, dt, work.visc_base)
     # the forces at the new positions and time (the one force evaluation of the step), the
     # second half rotation and kick
     if with_sources(fld):

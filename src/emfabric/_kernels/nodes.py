@@ -800,9 +800,11 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
     nodes, yarns, mat, fld = phys.nodes, phys.yarns, phys.material, phys.field
     uni, sourced = uniform_field(fld)
     nf = work.node_field
+    # the viscous rate from work.visc_base: x_n, or where contact placed a node, where its
+    # velocity after contact puts it a step back (records.Work.visc_base)
     arr = RowArrays(nodes.rows, nodes.mass, nodes.charge, yarns.inv_rest2, yarns.rest_length,
                     yarns.stiffness, sin.alpha, sout.alpha, work.damage_thr, nf, yarns.damping,
-                    sin.x, sin.strain, sout.strain, yarns.averaging_rate, dt)
+                    work.visc_base, sin.strain, sout.strain, yarns.averaging_rate, dt)
     viscous = yarns.damping.size > 0
     mode = TANGENT | STATS | (VISCOUS if viscous else 0)
     inv_dt = 1.0 / dt if dt > 0.0 else 0.0
@@ -847,6 +849,10 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
                 ee, _b = node_field_of(uni, sourced, nf, n, (x1[0, n], x1[1, n], x1[2, n]))
                 for c in range(3):
                     fy = buf[rf + c, i] - (charge[n] * ee[c] + mass[n] * grav[c])
+                    if viscous:
+                        # the yarns' elastic force: the viscous one has no energy that a
+                        # placement changes (its work is the kicks', records.SUM_WORK_VISCOUS)
+                        fy -= buf[ROW_VISC_FORCE + c, i]
                     proj += fy * (x1[c, n] - xbuf[c, n] - half * (v1[c, n] - v_pre[c, n]))
         sums[SUM_PROJECTION, j] = proj
         big = _rotate_row(nb, nx, inv_mass, charge, uni, sourced, nf, x1, half, v1, (0, nb), buf)

@@ -110,6 +110,16 @@ def _normal(nrm, k, i, j, box, sign):
     return 0.0, 0.0, sign
 
 
+PLY_PLACEMENT_LIMIT = 1.0
+"""The furthest ply contact places a node in one step, in contact distances d of its pair
+(_apply). The step keeps every relative motion of two nodes of a pack below d
+(contact.PLY_TRAVEL), so no pair that met at a gap of at least 0 needs more; where the sweeps
+would place a node further, they are resolving a tear or a fold that no placement satisfies
+(torn flaps crossing, a tangent plane extrapolated over a fold, passed back and forth sweep
+after sweep), and the strain a placement of a millimetre puts into the node's yarns is the
+scheme's, not the impact's (docs/theory.md §5.1)."""
+
+
 LEVEL_BOX = 3
 """Half-width (in master grid nodes) of the level neighbourhood that lets _pass skip a node:
 more than the 3 × 3 box around the nearest node plus the in-plane drift between plies that a
@@ -479,9 +489,10 @@ def ply_forces(phys, x, v, v_start, work, out, phi_dt):
 
 @njit(cache=True, inline="always")
 def _yarn_force(phys, sin, nf, n):
-    """The yarn force on node n at the start of the step: the State's force sin.f (the whole
-    ψ_n with q v_n × B) less the electric force q E (sin.e), gravity and q v_n × B(x_n) (nf: the
-    node fields of the step's start, as the drift used them)."""
+    """The yarns' elastic force on node n at the start of the step: the State's force sin.f
+    (the whole ψ_n with q v_n × B) less the electric force q E (sin.e), gravity, q v_n × B(x_n)
+    (nf: the node fields of the step's start, as the drift used them) and the yarns' viscous
+    force (sin.fv, where the yarns have one)."""
     nodes, fld = phys.nodes, phys.field
     uni, sourced = uniform_field(fld)
     x0, v0 = sin.x, sin.v
@@ -489,13 +500,19 @@ def _yarn_force(phys, sin, nf, n):
     q, m = nodes.charge[n], nodes.mass[n]
     fm = magnetic_force(q, (v0[0, n], v0[1, n], v0[2, n]), b)
     g = fld.gravity
-    return (sin.f[0, n] - q * sin.e[0, n] - m * g[0] - fm[0],
-            sin.f[1, n] - q * sin.e[1, n] - m * g[1] - fm[1],
-            sin.f[2, n] - q * sin.e[2, n] - m * g[2] - fm[2])
+    fx = sin.f[0, n] - q * sin.e[0, n] - m * g[0] - fm[0]
+    fy = sin.f[1, n] - q * sin.e[1, n] - m * g[1] - fm[1]
+    fz = sin.f[2, n] - q * sin.e[2, n] - m * g[2] - fm[2]
+    if sin.fv.shape[1] > 0:
+        # the elastic part: the yarns' viscous force (sin.fv) has no energy a placement changes
+        fx -= sin.fv[0, n]
+        fy -= sin.fv[1, n]
+        fz -= sin.fv[2, n]
+    return fx, fy, fz
 
 
 @njit(cache=True, _nrt=False)
-def _apply(phys, sin, x, v, acc, lag, span, flag, nf, mark):
+def _apply(phys, sin, x, v, acc, lag, span, flag, nf, mark, start):
     """Apply the summed impulses and placements of nodes lo..hi − 1, span = (lo, hi) (and clear
     them). Returns (dissipation [J]: the kinetic energy the impulses took; the work of the yarn
     force at the step's start (_yarn_force) over the displacement the velocity update does not
@@ -519,6 +536,8 @@ def _apply(phys, sin, x, v, acc, lag, span, flag, nf, mark):
     qi, qx = law.ply_quantum[0], law.ply_quantum[1]
     inv_mass, mass = nodes.inv_mass, nodes.mass
     steered = driven.shape[0] > 0
+    limit = PLY_PLACEMENT_LIMIT * law.ply_gap[p]
+    limit2 = limit * limit
     lost = 0.0
     work = 0.0
     moved = 0.0
@@ -533,9 +552,23 @@ def _apply(phys, sin, x, v, acc, lag, span, flag, nf, mark):
         fy = _yarn_force(phys, sin, nf, n)
         mine = 0.0
         kick = 0.0
+        # the placement, cut where it would take the node further than the pair's contact
+        # distance from where the step put it (PLY_PLACEMENT_LIMIT)
+        px = float(acc[1, 0, n]) * qx * im
+        py = float(acc[1, 1, n]) * qx * im
+        pz = float(acc[1, 2, n]) * qx * im
+        tx = x[0, n] + px - start[0, n]
+        ty = x[1, n] + py - start[1, n]
+        tz = x[2, n] + pz - start[2, n]
+        far = (tx * tx + ty * ty) + tz * tz
+        if far > limit2:
+            cut = math.sqrt(limit2 / far)
+            px = start[0, n] + cut * tx - x[0, n]
+            py = start[1, n] + cut * ty - x[1, n]
+            pz = start[2, n] + cut * tz - x[2, n]
         for c in range(3):
             dv = float(acc[0, c, n]) * qi * im
-            dx = float(acc[1, c, n]) * qx * im
+            dx = px if c == 0 else (py if c == 1 else pz)
             lost -= mass[n] * (v[c, n] * dv + 0.5 * dv * dv)
             if flag[n] == 0:
                 work += fy[c] * (dx - lag * dv)
@@ -667,6 +700,8 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
     acc = work.ply_acc
     nrm = work.ply_normals
     tol = PLY_TOLERANCE * law.ply_gap.min()
+    # where the step put the nodes, against which _apply bounds their placements
+    start = x.copy()
     shares = _shares_buffer(law, plies)
     # each ply's _region and normals, computed again only after its nodes were placed: the
     # sweeps of impulses alone leave the positions, and so these, as they are
@@ -731,7 +766,7 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
                   shares, (region[p + 1], box), law_p)
             d_lost, d_placed, d_moved, d_sped = _apply(
                 phys, sin, x, v, acc, lag, (nodes.ply_nodes[p], nodes.ply_nodes[p + 2]),
-                work.flag, work.node_field, (hot[plies:], p, tol, vtol, driven))
+                work.flag, work.node_field, (hot[plies:], p, tol, vtol, driven), start)
             if d_moved > 0.0:
                 stale[p] = 1
                 stale[p + 1] = 1

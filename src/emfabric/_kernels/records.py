@@ -149,7 +149,8 @@ class Yarns(NamedTuple):
     modulus: np.ndarray
     """𝔼 (KSV) or c (Fung) of each segment [Pa]."""
     area: float
-    """Undeformed cross-section A0 [m²] of the first ply (each segment's is stiffness·L0/𝔼)."""
+    """Undeformed cross-section A0 [m²] of the first ply's first segment, a warp (each
+    segment's is stiffness·L0/𝔼: fabric.rescale scales each family's with its own spacing)."""
     ply_segments: np.ndarray
     """(plies + 1,) int64: ply p's segments are ply_segments[p] ≤ s < ply_segments[p + 1]."""
     failure_stretch2: np.ndarray = np.zeros(0)
@@ -590,6 +591,12 @@ class Work(NamedTuple):
     ply_sum_stamp: np.ndarray
     """The ply_contact call (ply_epoch) whose sweeps wrote each node's ply_sum, −1 for none,
     (2, node_count) int64."""
+    visc_base: np.ndarray
+    """Central differences with the yarns' bulk viscosity: the positions the viscous rate of
+    the kick is taken from, (3, node_count) ((3, 1) without viscosity): the step's start x_n,
+    and for a node that contact placed, x_{n+1} − Δt v⁺ with v⁺ its velocity after the
+    contact impulses (explicit.central_step): a placement is not a motion of the yarn, and
+    taken as one over a step it made a rate of δ/Δt (docs/theory.md §2.1)."""
 
 
 def ply_box_size(ply_box: np.ndarray) -> int:
@@ -625,13 +632,14 @@ def grid_nodes(nx: int, ny: int, x0, mass, inv_mass, charge) -> Nodes:
 
 
 def make_work(node_count: int, row_count: int, seg_total: int, seg_count: int = 0,
-              plies: int = 1, ply_box: int = 1) -> Work:
+              plies: int = 1, ply_box: int = 1, viscous: bool = False) -> Work:
     """The workspace of a step: node_count nodes in row_count grid rows, seg_total yarn
     segments; seg_count: the segments segment contact may touch (0 without segment contact:
     its arrays are then one element long); plies: 1 leaves ply contact's arrays one node long;
     ply_box: the most master nodes a node meets in ply contact (Contact.ply_box's largest
     (2 i + 1)(2 j + 1), ply_box_size), which sizes ply_memo and ply_sum: central
-    differences' (the φ-scheme's passes keep neither, and leave it at 1)."""
+    differences' (the φ-scheme's passes keep neither, and leave it at 1); viscous: the yarns
+    have a bulk viscosity (Work.visc_base is then one column per node)."""
     n = node_count
     ny = row_count
     nmax = n + seg_count
@@ -658,4 +666,5 @@ def make_work(node_count: int, row_count: int, seg_total: int, seg_count: int = 
                 np.zeros(1, dtype=np.int64),
                 np.zeros((2, n if plies > 1 else 1, 3 * ply_box if plies > 1 else 1)),
                 np.full((2, n if plies > 1 else 1), -1, dtype=np.int64),
-                np.full((2, n if plies > 1 else 1), -1, dtype=np.int64))
+                np.full((2, n if plies > 1 else 1), -1, dtype=np.int64),
+                np.zeros((3, n if viscous else 1)))

@@ -67,7 +67,8 @@ class CentralDifference(IntegratorBase):
         self.work = make_work(model.node_count, model.ny, model.seg_count,
                               model.seg_count if model.physics.contact.segments else 0,
                               model.ply_count,
-                              ply_box_size(model.physics.contact.ply_box))
+                              ply_box_size(model.physics.contact.ply_box),
+                              viscous=model.yarns.damping.size > 0)
         self.work.frame[1] = model.flight_direction
         self.scratch = np.empty(model.node_count)
         self._measured: State | None = None  # the state work.diag belongs to
