@@ -13,7 +13,7 @@ from emfabric.integrators import make_integrator
 from emfabric.sim.builder import build_model
 from emfabric.sim.state import initial_state, update_forces
 
-from conftest import fabric_only
+from conftest import fabric_only, make
 
 L0, E, RHO, R = 1e-3, 100e9, 1440.0, 1e-4  # spacing [m], modulus [Pa], density, yarn radius [m]
 V0 = 0.05  # each column's speed [m/s]: the pair parts at 2 V0, a peak strain ~3e-6
@@ -175,7 +175,7 @@ def test_a_viscous_pack_s_budget_closes_as_an_elastic_one_s():
 
     errors = {}
     for q in (0.0, 0.06):
-        ds = run(load_scenario("demo-small", {**base, "solver.bulk_viscosity": q})).history
+        ds = run(make(**base, **{"solver.bulk_viscosity": q})).history
         assert ds.attrs["status"] == "complete"
         assert int(ds.broken_yarns.values[-1]) == 0
         energy_in = float(ds.kinetic_energy_projectile.values[0])
