@@ -65,7 +65,9 @@ def test_ply_tables_override_the_fabric():
 
 
 @pytest.mark.parametrize("bad, words", [
-    ({"fabric.ply_angles": [0.0, 45.0]}, "one angle"),
+    # the message leads with the key and its value
+    ({"fabric.ply_angles": [0.0, 45.0]}, r"fabric.ply_angles = \[0.0, 45.0\] has 2 values for "
+                                         r"fabric.plies = 3; allowed: one angle"),
     ({"fabric.ply": [{}, {}]}, "one table per ply"),
     ({"fabric.ply_spacing": 1e-4}, "interpenetrating"),
     ({"fabric.ply": [{}, {"damage": {"rate": 5.0}}, {}]}, "one damage law"),

@@ -393,12 +393,14 @@ class Fabric(_Section):
     def _ply_lists_match(self) -> Fabric:
         if self.ply and len(self.ply) != self.plies:
             raise ValueError(
-                f"{len(self.ply)} [[fabric.ply]] tables for plies = {self.plies}; allowed: one "
+                f"fabric.ply has {len(self.ply)} [[fabric.ply]] tables for fabric.plies = "
+                f"{self.plies}; allowed: one "
                 f"table per ply (or none): set plies = {len(self.ply)} or give {self.plies} "
                 "table(s)")
         if self.ply_angles and len(self.ply_angles) != self.plies:
             raise ValueError(
-                f"ply_angles has {len(self.ply_angles)} values for plies = {self.plies}; "
+                f"fabric.ply_angles = {list(self.ply_angles)} has {len(self.ply_angles)} "
+                f"values for fabric.plies = {self.plies}; "
                 f"allowed: one angle [deg] per ply (or none: all 0): set plies = "
                 f"{len(self.ply_angles)} or give {self.plies} angle(s)")
         for i, table in enumerate(self.ply):
@@ -1226,8 +1228,10 @@ def _format_errors(err: ValidationError, source: str, data: Any = None) -> str:
         if tags and kind in _TYPE_ERRORS:  # an array of tables told apart by a key
             rule = (f"needs a table with {where.discriminator} = {_one_of(tags)}, "
                     f"{_not(value, dict)}")
-        if not where.path and kind in _RULE_ERRORS:
-            lines.append(f"  {rule}")  # a rule of the whole scenario names its keys itself
+        if kind in _RULE_ERRORS and (not where.path or rule.startswith(f"{path}.")):
+            # a rule of the whole scenario, or of a section that names its keys by their
+            # dotted path, says itself what is wrong: not after "fabric = {...}:"
+            lines.append(f"  {rule}")
         else:
             lines.append(f"  {path} = {shown}: {rule}")
     return "\n".join(line if isinstance(line, str) else
