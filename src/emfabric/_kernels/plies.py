@@ -36,6 +36,7 @@ from numba import int64, njit
 from emfabric._kernels.contact import coulomb_cone, ply_penalty
 from emfabric._kernels.fields import magnetic_force, node_field_of, uniform_field
 from emfabric._kernels.records import ROW_COUNT
+from emfabric._kernels.vec3 import copy_into
 
 
 @njit(cache=True, _nrt=False)
@@ -701,7 +702,8 @@ def ply_contact(phys, sin, x, v, work, lag, driven):
     nrm = work.ply_normals
     tol = PLY_TOLERANCE * law.ply_gap.min()
     # where the step put the nodes, against which _apply bounds their placements
-    start = x.copy()
+    start = work.ply_start
+    copy_into(start, x)
     shares = _shares_buffer(law, plies)
     # each ply's _region and normals, computed again only after its nodes were placed: the
     # sweeps of impulses alone leave the positions, and so these, as they are

@@ -591,6 +591,10 @@ class Work(NamedTuple):
     ply_sum_stamp: np.ndarray
     """The ply_contact call (ply_epoch) whose sweeps wrote each node's ply_sum, −1 for none,
     (2, node_count) int64."""
+    ply_start: np.ndarray
+    """Where the step put each node before ply contact (plies.ply_contact), against which it
+    bounds the node's placements (plies.PLY_PLACEMENT_LIMIT), (3, node_count) ((3, 1) for one
+    ply)."""
     visc_base: np.ndarray
     """Central differences with the yarns' bulk viscosity: the positions the viscous rate of
     the kick is taken from, (3, node_count) ((3, 1) without viscosity): the step's start x_n,
@@ -667,4 +671,4 @@ def make_work(node_count: int, row_count: int, seg_total: int, seg_count: int = 
                 np.zeros((2, n if plies > 1 else 1, 3 * ply_box if plies > 1 else 1)),
                 np.full((2, n if plies > 1 else 1), -1, dtype=np.int64),
                 np.full((2, n if plies > 1 else 1), -1, dtype=np.int64),
-                np.zeros((3, n if viscous else 1)))
+                np.zeros((3, n if plies > 1 else 1)), np.zeros((3, n if viscous else 1)))

@@ -17,6 +17,7 @@ within one node spacing), with a bootstrap confidence interval over the shots.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -329,9 +330,7 @@ def unresolved_bracket(res: dict[str, Any]) -> str | None:
     if not hi - lo > tolerance:
         return None
     inside = res.get("unresolved") or []
-    counts: dict[str, int] = {}
-    for r in inside:
-        counts[r["status"]] = counts.get(r["status"], 0) + 1
+    counts = Counter(r["status"] for r in inside)
     what = ", ".join(f"{n} {st}" for st, n in sorted(counts.items()))
     return (f"V_BL = {res['v_bl']:.4g} m/s is known only to its bracket {lo:.4g} – {hi:.4g} "
             f"m/s, wider than --tolerance {tolerance:g} m/s: "
