@@ -258,6 +258,11 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, pen
             elif summed_at[n] != at:
                 _move_sums(summed, n, summed_at[n] - m0, (ci, cj, mnx, bi, bj), shares)
                 summed_at[n] = at
+        # the reaction of n's pairs on master, summed here (integers) and spread over the
+        # master nodes around the point where its line of action meets master's surface
+        # (_spread): impulses (or forces) in rx, placements in px
+        rx0, rx1, rx2 = int64(0), int64(0), int64(0)
+        px0, px1, px2 = int64(0), int64(0), int64(0)
         for dj in range(-bj, bj + 1):
             for di in range(-bi, bi + 1):
                 w = shares[0, (dj + bj) * wide + di + bi]
@@ -274,10 +279,9 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, pen
                 if forces:
                     fp = ply_penalty(share, stiff, gap, g, m_nk, nh, v, v_start, n, km, law,
                                      phi_dt)
-                    for c in range(3):
-                        units = _units(fp[c], qf)
-                        acc[0, c, n] += units
-                        acc[0, c, km] -= units
+                    rx0 += _units(fp[0], qf)
+                    rx1 += _units(fp[1], qf)
+                    rx2 += _units(fp[2], qf)
                     continue
                 # a node the projectile drives (in contact with it) acts as one of infinite
                 # mass: the other takes the whole placement and the impulse that brings it to
@@ -308,17 +312,162 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, pen
                 summed[n, o + 1] = tot[1]
                 summed[n, o + 2] = tot[2]
                 lift = share * m_nk * (gap - g)
+                rx0 += _units(j[0], qi)
+                rx1 += _units(j[1], qi)
+                rx2 += _units(j[2], qi)
+                if not place:
+                    continue
                 for c in range(3):
-                    units = _units(j[c], qi)
-                    acc[0, c, n] += units
-                    acc[0, c, km] -= units
-                    if not place:
-                        continue
                     units = _units(lift * nh[c], qx)
                     if move_n:
                         acc[1, c, n] += units
                     if move_k:
-                        acc[1, c, km] -= units
+                        if c == 0:
+                            px0 += units
+                        elif c == 1:
+                            px1 += units
+                        else:
+                            px2 += units
+        _spread(x, n, acc, (rx0, rx1, rx2), (px0, px1, px2),
+                (m0 + cj * mnx + ci, m0, mnx, mny, ci, cj),
+                _normal(nrm, m0 + cj * mnx + ci, ci, cj, box, sign), mass, driven, steered)
+
+
+FACET_SLACK = 1e-9
+"""How far outside its facet (in barycentric weight) a point may lie for _spread to put a reaction
+there: a point on an edge between two facets has weights of round-off size below zero in both.
+A line of action that meets no facet within the quads around the slave node's nearest master
+node (an impulse nearly along the surface: a later sweep's correction of friction) is replaced
+by the master's normal through the slave node; one that misses them too (a slave beyond
+master's edge) leaves the reaction on that nearest node. Wider, the facet that came nearest
+to the meeting point was chosen among facets mirror images of each other by the order of the
+search, and a head-on pack impact spun the projectile (tests/test_plies.py)."""
+
+
+@njit(cache=True, inline="always")
+def _cross_dot(ax, ay, az, bx, by, bz, n):
+    """(a × b)·n, each component of a × b as a difference of two products and the dot product
+    summed x, y, z: a mirror image (a component of a, b and n negated) gives the same number
+    to the bit."""
+    cx = ay * bz - az * by
+    cy = az * bx - ax * bz
+    cz = ax * by - ay * bx
+    return (cx * n[0] + cy * n[1]) + cz * n[2]
+
+
+@njit(cache=True, _nrt=False)
+def _facet(x, n, d, grid, mass):
+    """Where the line x_n + λd meets master's surface, as barycentric weights of a facet of it.
+    The surface is faceted: each grid quad of master around its node (ci, cj) nearest to n
+    (grid = (that node, master's first node, nx, ny, ci, cj)) is four triangles, one per edge
+    with the quad's centre (the mean of its corners: the same facets for a mirror image, where
+    splitting the quad along a diagonal would not be); of the sixteen, the one whose weights of
+    the meeting point have the largest least weight. Returns (that least weight, −inf if no line
+    meets a facet; the quad's first node a, its corners a, a + 1, a + 1 + nx, a + nx in cyclic
+    order; t, the facet's edge from corner t to corner t + 1; the weights of corner t, corner
+    t + 1 and the centre): Σ of the weights times the vertices is the meeting point, to
+    round-off."""
+    _k0, m0, mnx, mny, ci, cj = grid
+    best = -math.inf
+    best_a, best_t = -1, 0
+    best_u, best_w, best_v = 0.0, 0.0, 0.0
+    xn0, xn1, xn2 = x[0, n], x[1, n], x[2, n]
+    for qj in range(cj - 1, cj + 1):
+        for qi in range(ci - 1, ci + 1):
+            if qi < 0 or qj < 0 or qi + 1 >= mnx or qj + 1 >= mny:
+                continue
+            a = m0 + qj * mnx + qi
+            quad = (a, a + 1, a + 1 + mnx, a + mnx)  # cyclic
+            if (mass[quad[0]] == 0.0 or mass[quad[1]] == 0.0 or mass[quad[2]] == 0.0
+                    or mass[quad[3]] == 0.0):
+                continue
+            v0 = ((x[0, quad[0]] + x[0, quad[2]]) + (x[0, quad[1]] + x[0, quad[3]])) * 0.25
+            v1 = ((x[1, quad[0]] + x[1, quad[2]]) + (x[1, quad[1]] + x[1, quad[3]])) * 0.25
+            v2 = ((x[2, quad[0]] + x[2, quad[2]]) + (x[2, quad[1]] + x[2, quad[3]])) * 0.25
+            for t in range(4):
+                u = quad[t]
+                w = quad[(t + 1) % 4]
+                ux, uy, uz = x[0, u] - v0, x[1, u] - v1, x[2, u] - v2
+                wx, wy, wz = x[0, w] - v0, x[1, w] - v1, x[2, w] - v2
+                nf = (uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx)
+                area = (nf[0] * nf[0] + nf[1] * nf[1]) + nf[2] * nf[2]
+                along = (d[0] * nf[0] + d[1] * nf[1]) + d[2] * nf[2]
+                if area == 0.0 or along == 0.0:
+                    continue
+                lam = (((v0 - xn0) * nf[0] + (v1 - xn1) * nf[1]) + (v2 - xn2) * nf[2]) / along
+                q0, q1, q2 = xn0 + lam * d[0], xn1 + lam * d[1], xn2 + lam * d[2]
+                # each weight: the area of the triangle the point makes with the other two
+                # vertices, in the facet's order (u, w, centre), over the facet's
+                cu = _cross_dot(x[0, w] - q0, x[1, w] - q1, x[2, w] - q2,
+                                v0 - q0, v1 - q1, v2 - q2, nf) / area
+                cw = _cross_dot(v0 - q0, v1 - q1, v2 - q2,
+                                x[0, u] - q0, x[1, u] - q1, x[2, u] - q2, nf) / area
+                cv = _cross_dot(x[0, u] - q0, x[1, u] - q1, x[2, u] - q2,
+                                x[0, w] - q0, x[1, w] - q1, x[2, w] - q2, nf) / area
+                least = min(cu, min(cw, cv))
+                if least > best:
+                    best = least
+                    best_a, best_t = a, t
+                    best_u, best_w, best_v = cu, cw, cv
+    return best, best_a, best_t, best_u, best_w, best_v
+
+
+@njit(cache=True, _nrt=False)
+def _spread(x, n, acc, r, pl, grid, normal, mass, driven, steered):
+    """Node n's reaction on its master ply: n receives the impulses (or forces) r of its pairs
+    (integers), and master the opposite, spread over the four master nodes around the point
+    where their line of action through x_n meets master's surface (_facet), so that action and
+    reaction act along one line: the pairs keep the angular momentum to round-off, as they keep
+    the momentum (n receives exactly the sum of the parts its master nodes give back). Applied
+    at each pair's master node, as before, the reaction's moment differed from the action's by
+    the pair's in-plane offset (up to a node spacing) times its impulse, and a free pack's
+    angular momentum drifted by an amount that did not shrink with the step. The master's
+    placements pl (integers, mass times distance) are spread with the same weights over the
+    master nodes the projectile does not drive. grid: _facet's; normal: master's normal at the
+    nearest master node, the line taken where the line of action meets no facet around it
+    (FACET_SLACK: there the moment of the reaction's part along the surface is kept only to
+    the pair's gap times it); a line that misses them too (a slave beyond master's edge) leaves
+    the whole reaction on the nearest master node, grid[0]."""
+    if r[0] == 0 and r[1] == 0 and r[2] == 0 and pl[0] == 0 and pl[1] == 0 and pl[2] == 0:
+        return
+    d = (float(r[0]), float(r[1]), float(r[2]))
+    if d[0] == 0.0 and d[1] == 0.0 and d[2] == 0.0:
+        d = (float(pl[0]), float(pl[1]), float(pl[2]))
+    least, a, t, cu, cw, cv = _facet(x, n, d, grid, mass)
+    if least < -FACET_SLACK:
+        least, a, t, cu, cw, cv = _facet(x, n, normal, grid, mass)
+    count = 4
+    if least < -FACET_SLACK:
+        count = 1
+    mnx = grid[2]
+    got0, got1, got2 = int64(0), int64(0), int64(0)
+    for c in range(count):
+        if count == 1:
+            k = grid[0]
+            weight = 1.0
+        else:
+            k = a if c == 0 else (a + 1 if c == 1 else (a + 1 + mnx if c == 2 else a + mnx))
+            weight = 0.25 * cv
+            if c == t:
+                weight += cu
+            elif c == (t + 1) % 4:
+                weight += cw
+        u0 = _units(weight * float(r[0]), 1.0)
+        u1 = _units(weight * float(r[1]), 1.0)
+        u2 = _units(weight * float(r[2]), 1.0)
+        acc[0, 0, k] -= u0
+        acc[0, 1, k] -= u1
+        acc[0, 2, k] -= u2
+        got0 += u0
+        got1 += u1
+        got2 += u2
+        if not (steered and driven[k] != 0.0):
+            acc[1, 0, k] -= _units(weight * float(pl[0]), 1.0)
+            acc[1, 1, k] -= _units(weight * float(pl[1]), 1.0)
+            acc[1, 2, k] -= _units(weight * float(pl[2]), 1.0)
+    acc[0, 0, n] += got0
+    acc[0, 1, n] += got1
+    acc[0, 2, n] += got2
 
 
 @njit(cache=True, _nrt=False)
