@@ -161,6 +161,71 @@ def test_edited_scenario_is_refused(tmp_path):
     resume(tmp_path, load_scenario("demo-small", SMALL))
 
 
+@pytest.mark.parametrize("damage", ["history cut", "history record", "snapshot record"])
+def test_outputs_that_lost_records_are_not_resumed(tmp_path, damage):
+    """A history.nc or snapshots.nc that lost records since the checkpoint was written (a
+    truncated copy, a full disk: the file still opens, the lost records read as zeros) is
+    refused, naming the file, and nothing is written: an audit found `--resume` keeping 3666
+    records of zeros as the run's past and reporting the run complete. Cut: the history's
+    later records zero; record: only the last one the checkpoint counts differs (its digest);
+    snapshot: the last snapshot's positions zero."""
+    interrupted_demo(tmp_path, SMALL, after=40)
+    _, _, _, pos = read_checkpoint(tmp_path / CHECKPOINT)
+    assert pos.history_rows > 20 and pos.snapshots >= 2
+    if damage == "snapshot record":
+        with netCDF4.Dataset(tmp_path / "snapshots.nc", "a") as nc:
+            nc["node_position"][pos.snapshots - 1] = 0.0
+    else:
+        with netCDF4.Dataset(tmp_path / "history.nc", "a") as nc:
+            if damage == "history cut":
+                for var in nc.variables.values():
+                    if var.dimensions[:1] == ("time",):
+                        var[20:pos.history_rows] = 0
+            else:
+                nc["projectile_velocity"][pos.history_rows - 1] = [0.0, 0.0, 0.0]
+    name = "snapshots.nc" if damage == "snapshot record" else "history.nc"
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()}
+    with pytest.raises(CheckpointError, match=f"{name} is not what the checkpoint was "
+                                              f"written with.*nothing resumed"):
+        resume(tmp_path)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()} == before
+    r = subprocess.run([sys.executable, "-m", "emfabric", "run", "--resume", str(tmp_path),
+                        "--quiet"], capture_output=True, text=True)
+    assert r.returncode == 2 and name in r.stderr and "Traceback" not in r.stderr
+
+
+def test_a_run_stopped_before_its_first_step_leaves_a_folder_to_run_again(tmp_path,
+                                                                           monkeypatch):
+    """Ctrl-C after history.nc is created but before the first checkpoint (the first record
+    is measured while kernels compile: minutes on a cold cache): the empty history says the
+    run was stopped before its first step and that nothing resumes, not that `--resume`
+    continues it; `emfabric run` into the folder again runs without --force (it holds no
+    result), and the temporary file of a write killed halfway is cleared. An audit found
+    such a folder refused by both `--resume` ("no checkpoint") and a new run ("holds another
+    run ... use --force")."""
+    import emfabric.runner.loop as loop
+    from emfabric.io.outputs import run_in
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(loop, "measure", stopped)
+    with pytest.raises(KeyboardInterrupt):
+        run(load_scenario("demo-small", SMALL), tmp_path)
+    monkeypatch.undo()
+    h = xr.open_dataset(tmp_path / "history.nc")
+    assert h.sizes["time"] == 0 and h.attrs["status"] == "partial"
+    assert h.attrs["end_reason"] == loop.NOT_STARTED
+    assert not (tmp_path / CHECKPOINT).exists() and run_in(tmp_path) is None
+    (tmp_path / ".history.abc123.partial.nc").write_bytes(b"killed halfway")
+    r = subprocess.run([sys.executable, "-m", "emfabric", "run", "demo-small", "--out",
+                        str(tmp_path), "--quiet", "--set", "fabric.nodes=[8, 8]", "--set",
+                        "solver.end_time=2e-6"], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert xr.open_dataset(tmp_path / "history.nc").attrs["status"] == "complete"
+    assert not (tmp_path / ".history.abc123.partial.nc").exists()
+
+
 def test_other_version_is_refused(tmp_path, monkeypatch):
     interrupted_demo(tmp_path, SMALL, after=20)
     monkeypatch.setattr(emfabric, "__version__", "0.0.0-other")

@@ -83,8 +83,10 @@ def test_snapshots_and_paraview(small_run):
         np.testing.assert_allclose(mass @ snap.node_velocity[k].values, p, rtol=1e-12,
                                    atol=1e-12 * max(np.abs(p).max(), 1e-30))
     assert np.abs(snap.node_velocity[-1].values).max() > 1.0  # the struck sheet moves
-    # the run's end in its header too, as in history.nc's (it was created "partial")
+    # the run's end in its header too, as in history.nc's (it was created "partial"), and
+    # the run's wall time (it said the wall time at its first snapshot before 2026-12-07)
     assert (snap.attrs["status"], snap.attrs["end_reason"]) == (res.status, res.end_reason)
+    assert snap.attrs["wall_time_s"] == hist.attrs["wall_time_s"] == f"{res.wall_time:.3f}"
     pvd = (out / "fabric.pvd").read_text()
     assert pvd.count("<DataSet") == 4
     import meshio

@@ -104,14 +104,14 @@ def run(
         else:
             out_dir = Path("runs") / sc.name
         hold_folder(out_dir)  # one run at a time in a folder: exit 2 naming the holder
-        from emfabric.io.outputs import clear_run, run_in
+        from emfabric.io.outputs import clear_run, has_run_files, run_in
 
         held = run_in(out_dir)
         if held is not None and not force:
             error(f"{out_dir} holds another run ({held}); use --force to replace it, "
                   f"--resume {out_dir} to continue it, or --out to write elsewhere")
             raise typer.Exit(EXIT_INPUT)
-        if held is not None:
+        if held is not None or has_run_files(out_dir):  # or a run stopped before its start
             clear_run(out_dir)
 
         def start(progress_fn):
@@ -134,8 +134,14 @@ def run(
         except KeyboardInterrupt as exc:
             result = getattr(exc, "result", None)
             if result is None:
-                console.print("[yellow]interrupted[/] before the run started",
-                              highlight=False)
+                if (out_dir / CHECKPOINT).is_file():
+                    console.print("[yellow]interrupted[/] before the run went on; continue "
+                                  f"with `emfabric run --resume {escape(str(out_dir))}`",
+                                  highlight=False, soft_wrap=True)
+                else:
+                    console.print("[yellow]interrupted[/] before the run's first step: no "
+                                  "checkpoint, nothing to resume; run it again (into the "
+                                  "same folder: it holds nothing to keep)", highlight=False)
                 raise typer.Exit(EXIT_INTERRUPTED) from None
             console.print("[yellow]interrupted[/]: the history written so far is marked partial;"
                           f" continue with `emfabric run --resume {escape(str(out_dir))}`",

@@ -57,6 +57,11 @@ class RunPosition:
     """Time of the next snapshot [s]."""
     wall_time: float
     """Wall time spent so far [s]."""
+    history_digest: str = ""
+    """netcdf.record_digest of the last history record counted (history_rows − 1), "" if not
+    recorded: a resume compares it with the file's."""
+    snapshots_digest: str = ""
+    """netcdf.record_digest of the last snapshot counted, "" if none."""
 
 
 def write_checkpoint(path: Path, model: Model, state: State, pos: RunPosition) -> None:
@@ -69,8 +74,12 @@ def write_checkpoint(path: Path, model: Model, state: State, pos: RunPosition) -
             data[f.name] = (_DIMS[f.name], value)
         else:
             data[f.name] = ((), np.float64(value) if isinstance(value, float) else np.int64(value))
+    texts = {}
     for f in fields(RunPosition):
         value = getattr(pos, f.name)
+        if isinstance(value, str):
+            texts[f"run_{f.name}"] = value
+            continue
         data[f"run_{f.name}"] = ((), np.float64(value) if isinstance(value, float)
                                  else np.int64(value))
     ds = xr.Dataset(data, attrs={
@@ -78,6 +87,7 @@ def write_checkpoint(path: Path, model: Model, state: State, pos: RunPosition) -
         "emfabric_version": __version__,
         "checkpoint_format": FORMAT,
         "scenario": model.scenario.to_toml(),
+        **texts,
     })
 
     def write_and_check(tmp: Path) -> None:
@@ -120,7 +130,9 @@ def read_checkpoint(path: Path) -> tuple[Scenario, str, State, RunPosition]:
         values[f.name] = (np.array(var, dtype=np.float64) if var.ndim else
                           (float(var) if var.dtype.kind == "f" else int(var)))
     state = State(**values)
-    pos = RunPosition(**{f.name: (float if f.type == "float" else int)(ds[f"run_{f.name}"].values)
+    pos = RunPosition(**{f.name: (str(ds.attrs.get(f"run_{f.name}", "")) if f.type == "str"
+                                  else (float if f.type == "float" else int)(
+                                      ds[f"run_{f.name}"].values))
                          for f in fields(RunPosition)})
     return scenario, str(ds.attrs.get("emfabric_version", "?")), state, pos
 

@@ -160,16 +160,29 @@ def history_status(path: Path) -> tuple[str, str, str] | None:
         return None
 
 
+def history_records(path: Path) -> int | None:
+    """The number of records in a history.nc, or None if it cannot be read."""
+    import netCDF4
+
+    try:
+        with netCDF4.Dataset(path, "r") as nc:
+            return len(nc.dimensions["time"])
+    except (OSError, KeyError):
+        return None
+
+
 _KEPT: list = []
 """netCDF4 Datasets whose close failed, never collected (netCDF4 would close them again)."""
 
 
-def mark_status(path: Path, status: str, end_reason: str) -> bool:
+def mark_status(path: Path, status: str, end_reason: str, wall_time: str | None = None) -> bool:
     """Set history.nc's `status` and `end_reason` in place, without writing anything else: the
-    way to record a run's end when the disk is full (a rewrite of the file needs room). The
-    file's header never grows (it would move the records): `end_reason` is cut to the room
-    of the one it replaces (a running run's is long enough for a write error, see
-    emfabric.runner.loop.RUNNING). Returns whether it was done."""
+    way to record a run's end when the disk is full (a rewrite of the file needs room), and
+    snapshots.nc's at a run's end. The file's header never grows (it would move the records):
+    `end_reason` is cut to the room of the one it replaces (a running run's is long enough for
+    a write error, see emfabric.runner.loop.RUNNING); `wall_time` (wall_time_s's text) is set
+    where it fits the room of the one written when the file was created (up to 9999.999 s
+    after one of 0.x s). Returns whether it was done."""
     import netCDF4
 
     def room(text) -> int:  # bytes of header a text attribute takes (padded to 4)
@@ -189,6 +202,9 @@ def mark_status(path: Path, status: str, end_reason: str) -> bool:
                     "…".encode()
             nc.setncattr("status", status)
             nc.setncattr("end_reason", reason.decode("utf-8"))
+            if (wall_time is not None and "wall_time_s" in nc.ncattrs()
+                    and room(wall_time) <= room(nc.getncattr("wall_time_s"))):
+                nc.setncattr("wall_time_s", wall_time)
             done = True
     except (OSError, RuntimeError, AttributeError, KeyError):
         done = False

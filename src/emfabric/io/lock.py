@@ -9,9 +9,10 @@ from before a reboot, is not taken for its holder). It is removed when the holde
 way Python sees (a normal end, an exception, Ctrl-C, SIGTERM or SIGHUP through the command
 line's handlers).
 
-A lock whose holder is gone (its pid no longer runs on this host, or the file cannot be read)
-is stale: the next run takes it over with a warning in the log. A lock held by a process on
-another host cannot be checked from here and is respected.
+A lock whose holder is gone (its pid no longer runs on this host or is a zombie, killed and
+not yet reaped by its parent, or the file cannot be read) is stale: the next run takes it
+over with a warning in the log. A lock held by a process on another host cannot be checked
+from here and is respected.
 
 In one process the lock is re-entrant for the thread that holds it (the command line holds
 the folder, then the run it starts takes it again); another thread of the same process is
@@ -75,12 +76,22 @@ def _boot_id() -> str | None:
         return None
 
 
-def _start_tick(pid: int) -> int | None:
-    """The process's start time in clock ticks since boot (Linux /proc), or None."""
+def _stat(pid: int) -> list[str] | None:
+    """The fields of /proc/PID/stat after the command name (Linux), or None: [0] the state,
+    [19] the start time in clock ticks since boot."""
     try:
         stat = Path(f"/proc/{pid}/stat").read_text()
-        return int(stat[stat.rindex(")") + 2:].split()[19])
-    except (OSError, ValueError, IndexError):
+        return stat[stat.rindex(")") + 2:].split()
+    except (OSError, ValueError):
+        return None
+
+
+def _start_tick(pid: int) -> int | None:
+    """The process's start time in clock ticks since boot (Linux /proc), or None."""
+    fields = _stat(pid)
+    try:
+        return int(fields[19]) if fields is not None else None
+    except (ValueError, IndexError):
         return None
 
 
@@ -135,6 +146,11 @@ def holder_alive(holder: dict) -> bool:
         pass  # alive, another user's
     except OSError:
         return True
+    fields = _stat(pid)
+    if fields is not None and fields[0] in ("Z", "X", "x"):
+        # a zombie: killed (SIGKILL, the OOM killer), not yet reaped by its parent; it holds
+        # nothing any more and never runs again
+        return False
     tick = holder.get("start_tick")
     now = _start_tick(pid)
     return not (tick is not None and now is not None and tick != now)

@@ -168,3 +168,22 @@ def read_records(path: str | Path, dim: str, count: int) -> dict[str, np.ndarray
                              f"expected at least {count}")
         return {name: np.array(var[:count]) for name, var in nc.variables.items()
                 if var.dimensions[:1] == (dim,)}
+
+
+def record_digest(path: str | Path, dim: str, index: int) -> str:
+    """SHA-256 (hex) of record `index` along `dim` of every variable along it (raw values, by
+    variable name): what a checkpoint records of the last history record and snapshot it
+    counts, so that a resume can tell the records it keeps from a file that lost them."""
+    import hashlib
+
+    import netCDF4
+
+    digest = hashlib.sha256()
+    with netCDF4.Dataset(path, "r") as nc:
+        nc.set_auto_maskandscale(False)
+        for name in sorted(nc.variables):
+            var = nc.variables[name]
+            if var.dimensions[:1] == (dim,):
+                digest.update(name.encode("utf-8"))
+                digest.update(np.ascontiguousarray(var[index]).tobytes())
+    return digest.hexdigest()

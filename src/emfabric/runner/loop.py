@@ -37,6 +37,7 @@ from emfabric.io.history import (
     write_history,
 )
 from emfabric.io.lock import folder_lock
+from emfabric.io.netcdf import record_digest
 from emfabric.io.snapshots import Snapshots, snapshot_times, truncate_snapshots
 from emfabric.runner import precompile
 from emfabric.runner.summary import summarize
@@ -54,6 +55,10 @@ RUNNING = ("running; if it is not (killed), `emfabric run --resume` on this fold
 """history.nc's end_reason while the run goes (status "partial"). Long enough on purpose: a
 write error on a full disk is recorded in its place, in the file's header as it stands
 (emfabric.io.history.mark_status)."""
+NOT_STARTED = ("interrupted before its first step: no checkpoint, nothing to resume; run the "
+               "scenario again")
+"""history.nc's end_reason for a run stopped before its first step (no longer than RUNNING:
+it replaces it in the header as it stands, emfabric.io.history.mark_status)."""
 
 # Set by `interrupt` (the command line's SIGINT/SIGTERM/SIGHUP handler). The handler also raises
 # KeyboardInterrupt at once, but Python drops an exception raised while it runs a weakref
@@ -116,7 +121,14 @@ def run(
     out = Path(out_dir)
     # one run at a time per folder (emfabric.io.lock): FolderInUse before anything is written
     with folder_lock(out):
-        return _loop(model, None, None, out, progress, end_time, threads)
+        try:
+            return _loop(model, None, None, out, progress, end_time, threads)
+        except KeyboardInterrupt as exc:
+            if getattr(exc, "result", None) is None and not (out / CHECKPOINT).is_file():
+                # stopped before its first step (while the kernels compiled): the empty
+                # history says so, not that a resume would continue it
+                mark_status(out / "history.nc", "partial", NOT_STARTED)
+            raise
 
 
 def resume(out_dir: str | Path, scenario: Scenario | None = None, *,
@@ -170,7 +182,43 @@ def _resume(out: Path, scenario: Scenario | None, progress: ProgressFn | None,
     except (OSError, ValueError, KeyError) as err:
         raise CheckpointError(f"{out}: the history or snapshots written with the checkpoint "
                               f"cannot be read ({err})") from None
+    try:
+        _kept_outputs(out, pos, state, rows[:, 0], times)
+    except (OSError, ValueError, KeyError, IndexError) as err:
+        raise CheckpointError(
+            f"{out}: {err}; nothing resumed (the run's past is not on disk any more): run the "
+            f"scenario again, into a new --out or this one with --force") from None
     return _loop(model, state, (pos, rows, times, extends), out, progress, None, threads)
+
+
+def _kept_outputs(out: Path, pos: RunPosition, state: State, history_times: np.ndarray,
+                  snapshot_times_: list[float]) -> None:
+    """ValueError unless history.nc and snapshots.nc still hold what the checkpoint counts: a
+    file cut short (a copy that stopped, a full disk, a truncation) can still open, its lost
+    records read as zeros, and a resume would keep them as the run's past. The records'
+    times rise from 0 to the checkpoint's (the last history record is the checkpoint's own
+    state), and the last record of each is the one the checkpoint saw (its digest)."""
+    t = np.asarray(history_times)
+    if t.size == 0 or t[0] != 0.0 or np.any(np.diff(t) <= 0.0) or t[-1] != state.t:
+        bad = (0 if t.size == 0 or t[0] != 0.0 else
+               int(np.argmax(np.diff(t) <= 0.0)) + 1 if np.any(np.diff(t) <= 0.0)
+               else t.size - 1)
+        raise ValueError(f"history.nc is not what the checkpoint was written with: its record "
+                         f"{bad} is not one of the run's (the times do not rise from 0 to the "
+                         f"checkpoint's t = {state.t:.9g} s), the file lost records since")
+    if pos.history_digest and record_digest(out / "history.nc", "time",
+                                            pos.history_rows - 1) != pos.history_digest:
+        raise ValueError(f"history.nc is not what the checkpoint was written with: its record "
+                         f"{pos.history_rows - 1} differs from the one the checkpoint saw")
+    s = np.asarray(snapshot_times_)
+    if s.size and (s[0] != 0.0 or np.any(np.diff(s) <= 0.0) or s[-1] > state.t):
+        raise ValueError("snapshots.nc is not what the checkpoint was written with: its times "
+                         f"do not rise from 0 to at most the checkpoint's t = {state.t:.9g} s, "
+                         f"the file lost snapshots since")
+    if pos.snapshots_digest and record_digest(out / "snapshots.nc", "snapshot",
+                                              pos.snapshots - 1) != pos.snapshots_digest:
+        raise ValueError(f"snapshots.nc is not what the checkpoint was written with: its "
+                         f"snapshot {pos.snapshots - 1} differs from the one the checkpoint saw")
 
 
 def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
@@ -271,12 +319,20 @@ def _run_loop(model: Model, s_in: State | None, resumed, out: Path | None,
             if history is not None and (out / "snapshots.nc").is_file():
                 # the run's end in snapshots.nc's header too (its attributes are those it was
                 # created with: status partial), in place (its records stay where they are)
-                mark_status(out / "snapshots.nc", status, reason)
+                mark_status(out / "snapshots.nc", status, reason,
+                            history.attrs["wall_time_s"])
         if model.scenario is None:
             return  # nothing to rebuild the Model from on resume
         state, position = at if at is not None else (s_in, RunPosition(
             written, snaps.count if regular is None else regular, next_snap, wall()))
         with _naming(out / CHECKPOINT):
+            # the last history record and snapshot the checkpoint counts, as on disk: a resume
+            # keeps only files that still hold them (_kept_outputs)
+            position.history_digest = record_digest(out / "history.nc", "time",
+                                                    position.history_rows - 1)
+            if position.snapshots > 0:
+                position.snapshots_digest = record_digest(out / "snapshots.nc", "snapshot",
+                                                          position.snapshots - 1)
             write_checkpoint(out / CHECKPOINT, model, state, position)
 
     next_checkpoint = 0.0  # the first step is saved at once: a killed run always has files
