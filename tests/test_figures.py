@@ -164,6 +164,27 @@ def test_failed_cases_of_other_metrics_are_gaps_and_counted():
     assert "1 of 6 cases without a value" in fig.get_suptitle()
 
 
+def test_diverged_cases_are_gaps_in_every_metric_but_their_wall_time():
+    """A case that diverged keeps in results.nc the state it stopped in (a residual speed of
+    250 m/s, a deflection of 6e5 m: no result), so its metrics are gaps, counted in the title,
+    not points joined to the others (an audit found them drawn at 6.5e8 mm); its wall time is
+    its own and is drawn."""
+    ds = results()
+    status = np.full((3, 2), "complete", dtype=object)
+    status[2, 1] = "diverged"
+    ds["status"] = (("field.B", "projectile.mass"), status)
+    ds["max_deflection"][2, 1] = 6.5e5
+    fig = metric_figure(ds, "max_deflection")
+    drawn = np.concatenate([line.get_ydata() for line in fig.axes[0].lines])
+    assert np.isnan(fig.axes[0].lines[1].get_ydata()[2]) and np.nanmax(drawn) < 1e4
+    assert "1 of 6 cases without a value (diverged, failed or not run)" in fig.get_suptitle()
+    for name in ("final_angular_velocity", "residual_speed"):
+        assert "1 of 6 cases without a value" in metric_figure(ds, name).get_suptitle()
+    wall = metric_figure(ds, "wall_time")
+    assert np.isfinite(wall.axes[0].lines[1].get_ydata()[2])
+    assert "without a value" not in wall.get_suptitle()
+
+
 def test_a_vector_axis_is_numeric_on_the_component_that_varies():
     """field.B = [[0.05,0,0],[0.1,0,0],[0.2,0,0]]: x is B_x in T, numeric, not labels."""
     ax = metric_figure(results(), "residual_speed").axes[0]

@@ -410,6 +410,23 @@ def test_design_field_brackets_the_target_tilt(tmp_path):
 
     assert direct(hi) >= 0.01 > direct(lo)
     assert out["estimate_eq54"] > 0 and (tmp_path / "design.png").is_file()
+    # design.json says what was searched: the scenario with its --set overrides, the version
+    _records_its_scenario(full, "demo-small", {"fabric.nodes": [21, 21],
+                                               "projectile.gap": 0.0})
+
+
+def _records_its_scenario(full: dict, name: str, overrides: dict) -> None:
+    """A study's JSON holds the scenario it studied, --set overrides applied, and the version
+    (an audit found ballistic.json and design.json naming the built-in scenario alone)."""
+    import tomllib
+
+    import emfabric
+    from emfabric.config.scenario import load_scenario, scenario_from_dict
+
+    assert full["emfabric_version"] == emfabric.__version__
+    assert full["scenario"] == name
+    stored = scenario_from_dict(tomllib.loads(full["base_scenario"]))
+    assert stored.to_toml() == load_scenario(name, overrides).to_toml()
 
 
 def test_design_field_stops_going_up_once_the_tilt_falls_with_the_field():
@@ -671,6 +688,9 @@ def test_ballistic_limit_end_to_end(tmp_path):
     assert lj["v_bl"] <= hi and lj["rms_residual"] < 0.1 * hi
     ds = xr.open_dataset(tmp_path / "ballistic.nc")
     assert ds.sizes["shot"] == out["runs"] and (tmp_path / "ballistic.png").is_file()
+    _records_its_scenario(full, "rupture", {"fabric.nodes": [11, 11],
+                                            "solver.end_time": BL_END})
+    assert ds.attrs["base_scenario"] == full["base_scenario"]
     # MODEL §7's {"a", "p", "v_bl"}: the curve v_r = a (v_s^p − V_BL^p)^(1/p) they give, at the
     # perforating shots of ballistic.nc, has the fit's residual (0 < a ≤ 1, p ≥ 1: v_r ≤ v_s)
     assert 0.0 < lj["a"] <= 1.0 and lj["p"] >= 1.0

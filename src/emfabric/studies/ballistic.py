@@ -275,8 +275,18 @@ def ballistic_limit(scenario: Scenario, out, *, seeds: int = 0, tolerance: float
     result["shots"] = shots
     result["runs"] = len(shots)
     result["scenario"] = scenario.name
+    # what the limit is of: the whole scenario the shots were varied from (its --set overrides
+    # applied), and the package that fired them
+    result["base_scenario"] = scenario.to_toml()
+    result["emfabric_version"] = _version()
     result["non_monotone"] = non_monotone(shots, result["v_bl"])
     return result
+
+
+def _version() -> str:
+    from emfabric import __version__
+
+    return __version__
 
 
 def seeded_shots(fire, scenario: Scenario, v_bl: float,
@@ -399,13 +409,15 @@ def write_outputs(res: dict[str, Any], out: Path) -> list[Path]:
         "residual_speed": ("shot", np.array([s["residual_speed"] for s in shots]),
                            {"units": "m s-1"}),
         "perforated": ("shot", np.array([s["perforated"] for s in shots], dtype=np.int8),
-                       {"long_name": "1 perforated, 0 stopped, -1 failed"}),
+                       {"long_name": "1 perforated, 0 stopped, -1 failed", "units": "1"}),
         "seed": ("shot", np.array([-1 if s["seed"] is None else s["seed"] for s in shots]),
-                 {"long_name": "modulus seed and impact jitter (-1: the scenario as given)"}),
+                 {"long_name": "modulus seed and impact jitter (-1: the scenario as given)",
+                  "units": "1"}),
         "status": ("shot", np.array([str(s["status"]) for s in shots])),
     }, attrs={"title": "emfabric ballistic limit", "emfabric_version": __version__,
               "v_bl": res["v_bl"], "lambert_jonas": jsontext.dumps(res["lambert_jonas"]),
-              "v50": jsontext.dumps(res.get("v50"))})
+              "v50": jsontext.dumps(res.get("v50")),
+              **({"base_scenario": res["base_scenario"]} if "base_scenario" in res else {})})
     write_netcdf(ds, out / "ballistic.nc")
     from emfabric.viz.study_plots import ballistic_figure
 

@@ -232,4 +232,11 @@ def design_field(scenario: Scenario, tilt: float, by: float, out, *,
             "estimate_eq54": est.B, "target_tilt": tilt, "by": by, "bracket": [lo, hi],
             "probes": [{"scale": p.scale, "max_tilt": p.tilt, "status": p.status}
                        for p in sorted(probes.values(), key=lambda p: p.scale)],
-            "runs": len(probes)}
+            "runs": len(probes), "scenario": scenario.name,
+            "base_scenario": scenario.to_toml(), "emfabric_version": _version()}
+
+
+def _version() -> str:
+    from emfabric import __version__
+
+    return __version__

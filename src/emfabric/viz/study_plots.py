@@ -270,11 +270,14 @@ def _sampled_axes(ds: xr.Dataset) -> list[tuple[str, StudyAxis]]:
 
 
 def metric_values(ds: xr.Dataset, name: str) -> tuple[xr.DataArray, str, int]:
-    """The metric in its drawn unit (−1 of the integer metrics as NaN), the unit, and how
-    many cases have no value."""
+    """The metric in its drawn unit (−1 of the integer metrics as NaN, and every metric of a
+    case that diverged or failed: results.nc keeps the state a diverged run stopped in, which
+    is no result; its wall time is), the unit, and how many cases have no value."""
     da = ds[name].astype(float)
     if name in _NO_VALUE:
         da = da.where(da >= 0)
+    if "status" in ds and name != "wall_time":
+        da = da.where(~ds["status"].astype(str).isin(["diverged", "failed"]))
     lab = METRIC_LABELS.get(name, MetricLabel(name.replace("_", " ")))
     unit, factor = _drawn_unit(str(ds[name].attrs.get("units", "")), lab.unit)
     da = da * factor
@@ -317,7 +320,7 @@ def metric_figure(ds: xr.Dataset, name: str) -> Figure | None:
             note = (f"{missing} of {total} cases undecided or failed (perforated = −1): "
                     f"left out")
     elif missing:
-        note = f"{missing} of {total} cases without a value (failed or not run)"
+        note = f"{missing} of {total} cases without a value (diverged, failed or not run)"
 
     heat = (name != "perforated" and not sampled and len(dims) == 2
             and all(a.ticks is None for a in axes_info)
