@@ -432,7 +432,7 @@ def test_a_pack_gives_the_same_numbers_on_any_thread_count():
 @pytest.mark.parametrize("integrator", ["central-difference", "phi"])
 @pytest.mark.parametrize("pull", [0.0, 1.5])
 def test_a_ply_pressed_onto_the_next_by_a_field(integrator, pull):
-    """Two free rigid 2 × 2 plies (all nodes alike: no yarn stretches), touching; the top one
+    """Two free rigid 2 × 2 plies (all nodes alike), touching; the top one
     charged (q per node), the lower one not, E = (0, E_y, −E_z) presses the top ply onto the
     lower one. Closed form per node pair (mass m each): the pack's momentum grows by 4 q E t
     (exact: no other force acts on it); pressed (E_y = 0) the plies move as one at
@@ -440,7 +440,8 @@ def test_a_ply_pressed_onto_the_next_by_a_field(integrator, pull):
     dragged by μ_d N (N = q E_z/2 per node): v_y = μ_d q E_z t/(2m) below, q (E_y − μ_d E_z/2)
     t/m above, and along z the plies move as one on average but tip: the friction between
     them acts the contact distance from their nodes, and ply contact keeps its moment
-    (plies._spread). No yarn stretches, so the energy budget closes to round-off: the placement's
+    (plies._spread). Pressed, no yarn stretches, so the energy budget closes to round-off (slid,
+    to the scheme's own error over the strain the tipping puts in): the placement's
     work is the yarns' alone (plies._apply; with the field's too, central differences booked
     h²|qE|²/2m a step twice and the divergence guard stopped the pressed pack at its first
     step)."""
@@ -478,7 +479,12 @@ def test_a_ply_pressed_onto_the_next_by_a_field(integrator, pull):
         np.testing.assert_allclose(v[1, 4:], mu_d * q * ez * t / (2 * m), rtol=1e-2)
         np.testing.assert_allclose(v[1, :4], q * (pull - mu_d * ez / 2) * t / m, rtol=1e-2)
     assert res.status == "complete"
-    assert abs(float(h.energy_balance_error[-1])) < 1e-9 * float(h.work_field[-1])
+    # pressed, no yarn stretches and the budget closes to round-off; slid, the tipping
+    # stretches the yarns (3.2e-9 J of strain at 5 µs) and central differences close it to
+    # their own second-order error: 4.2e-11 / 1.1e-11 / 3.0e-12 J at courant 0.25 / 0.125 /
+    # 0.0625 (the φ-scheme 9e-14 J)
+    bound = 1e-9 if pull == 0.0 else 1e-7
+    assert abs(float(h.energy_balance_error[-1])) < bound * float(h.work_field[-1])
 
 
 def _three_rigid_plies(size=0.002, **kw):
