@@ -13,7 +13,7 @@ from emfabric.integrators import make_integrator
 from emfabric.sim.builder import build_model, failure_stretches
 from emfabric.sim.state import initial_state
 
-from conftest import fabric_only
+from conftest import fabric_only, make
 
 H, NX = 1e-3, 601  # node spacing [m] and nodes of the struck yarn (a 0.6 m yarn)
 HY = 2.0  # the strip's clamped side rows are 2 m away: their links stretch by ~1e-5
@@ -340,6 +340,10 @@ def test_brittle_keys_are_checked():
         fabric_only(**{"fabric.damage.law": "brittle"})
     with pytest.raises(ScenarioError, match="weibull_shape"):
         fabric_only(**{"fabric.damage.weibull_shape": 3.0})
+    # the key the user wrote is the one named (it blamed weibull_shape = 0.0 before)
+    with pytest.raises(ScenarioError, match=r"damage\.strain_averaging = 0\.0 chooses law = "
+                                            r"'brittle', which needs a failure strain"):
+        make(**{"fabric.damage.strain_averaging": 0.0})
     with pytest.raises(ScenarioError, match="rate"):
         fabric_only(**{"fabric.damage.law": "brittle", "fabric.damage.failure_strain": 0.03,
                        "fabric.damage.rate": 5.0})

@@ -342,8 +342,10 @@ class Fabric(_Section):
                 or (t.damage is not None and t.damage.failure_strain is not None)
                 for t in self.ply)
             if dmg.failure_strain is None and self.material.failure_strain is None and not own:
+                # the key that chose the law (failure_strain is not given here)
+                chooser = ("weibull_shape" if dmg.weibull_shape > 0.0 else "strain_averaging")
                 why = ("damage.law = 'brittle'" if "law" in dmg.model_fields_set else
-                       f"damage.weibull_shape = {dmg.weibull_shape} chooses law = 'brittle', "
+                       f"damage.{chooser} = {getattr(dmg, chooser)} chooses law = 'brittle', "
                        "which")
                 raise ValueError(
                     f"{why} needs a failure strain: allowed: damage.failure_strain, "
