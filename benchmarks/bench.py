@@ -786,9 +786,11 @@ courant / (2 FINE). ogive-field needs 16: down to courant / 4 its segment contac
 the converged run's slide (docs/theory.md §5.2; `--ladder ogive-field`)."""
 
 
-def bench_side_by_side(names: list[str], cache: Path | None) -> list[dict]:
+def bench_side_by_side(names: list[str], cache: Path | None,
+                       courants: tuple[float, ...] = ()) -> list[dict]:
     """Each scenario run by the φ-scheme (its defaults) and by central differences (the default
-    courant), against central differences at courant / FINE, itself checked at half that."""
+    courant, and each of `courants` too), against central differences at courant / FINE,
+    itself checked at half that."""
     from emfabric import load_scenario
 
     out = []
@@ -802,10 +804,14 @@ def bench_side_by_side(names: list[str], cache: Path | None) -> list[dict]:
         row = {"name": name, "comps": comps, "courant": courant, "fine": k,
                "ref_summary": ref_summary,
                "check": spin_error(ref, chk, comps), "schemes": {}}
-        for scheme in ("phi", "central-difference"):
+        settings = [("phi", {"solver.integrator": "phi"}),
+                    ("central-difference", {"solver.integrator": "central-difference"})]
+        settings += [(f"central-difference {c:g}", {"solver.integrator": "central-difference",
+                                                    "solver.courant": c}) for c in courants]
+        for scheme, over in settings:
             gc.collect()
             start = cpu_snapshot()
-            run, summary = _history_run(name, {"solver.integrator": scheme}, None)
+            run, summary = _history_run(name, over, None)
             row["schemes"][scheme] = {"summary": summary, "busy": other_cpu(start),
                                       "error": spin_error(run, ref, comps)}
         out.append(row)
@@ -826,7 +832,9 @@ def print_side_by_side(rows: list[dict]) -> None:
         for scheme, x in r["schemes"].items():
             s, e = x["summary"], x["error"]
             evals[scheme] = s["force_evaluations"]
-            label = scheme if scheme == "phi" else f"central-diff. {r['courant']:g}"
+            label = scheme if scheme == "phi" else (
+                f"central-diff. {r['courant']:g}" if scheme == "central-difference"
+                else "central-diff. " + scheme.split()[-1])
             ok = ""
             if scheme != "phi" and track_t is not None:
                 good = e["track"] <= track_t and (exit_t is None or e["exit"] <= exit_t)
@@ -1337,6 +1345,9 @@ def main(argv: list[str] | None = None) -> None:
                    default=list(SIDE_BY_SIDE),
                    help="(h): these scenarios by both schemes (none: skip)")
     p.add_argument("--side-by-side-only", action="store_true", help="only (h)")
+    p.add_argument("--side-by-side-courant", type=float, nargs="*", default=[],
+                   metavar="C", help="(h): central differences at these courant numbers too "
+                   "(e.g. 0.5, the fifth of the φ-scheme's evaluations)")
     p.add_argument("--ladder", metavar="SCENARIO",
                    help="only (l): SCENARIO by central differences at its courant / 2^k, "
                         "each run against the next and the finest (long: the finest of 5 "
@@ -1400,7 +1411,8 @@ def main(argv: list[str] | None = None) -> None:
         say(f"Other processes used {other_cpu(cpu0):.2f} cores on average while this ran")
         return
     if a.side_by_side_only:
-        print_side_by_side(bench_side_by_side(a.side_by_side, a.reference_cache))
+        print_side_by_side(bench_side_by_side(a.side_by_side, a.reference_cache,
+                                              tuple(a.side_by_side_courant)))
         say(f"Other processes used {other_cpu(cpu0):.2f} cores on average while this ran")
         return
     if a.loaded_only:
@@ -1482,7 +1494,8 @@ def main(argv: list[str] | None = None) -> None:
 
     if a.side_by_side and not a.quick:
         section = cpu_snapshot()
-        print_side_by_side(bench_side_by_side(a.side_by_side, a.reference_cache))
+        print_side_by_side(bench_side_by_side(a.side_by_side, a.reference_cache,
+                                              tuple(a.side_by_side_courant)))
         busy_note(section)
         say()
 
