@@ -206,19 +206,17 @@ def _kept_outputs(out: Path, pos: RunPosition, state: State, history_times: np.n
         raise ValueError(f"history.nc is not what the checkpoint was written with: its record "
                          f"{bad} is not one of the run's (the times do not rise from 0 to the "
                          f"checkpoint's t = {state.t:.9g} s), the file lost records since")
-    if pos.history_digest and record_digest(out / "history.nc", "time",
-                                            pos.history_rows - 1) != pos.history_digest:
-        raise ValueError(f"history.nc is not what the checkpoint was written with: its record "
-                         f"{pos.history_rows - 1} differs from the one the checkpoint saw")
     s = np.asarray(snapshot_times_)
     if s.size and (s[0] != 0.0 or np.any(np.diff(s) <= 0.0) or s[-1] > state.t):
         raise ValueError("snapshots.nc is not what the checkpoint was written with: its times "
                          f"do not rise from 0 to at most the checkpoint's t = {state.t:.9g} s, "
                          f"the file lost snapshots since")
-    if pos.snapshots_digest and record_digest(out / "snapshots.nc", "snapshot",
-                                              pos.snapshots - 1) != pos.snapshots_digest:
-        raise ValueError(f"snapshots.nc is not what the checkpoint was written with: its "
-                         f"snapshot {pos.snapshots - 1} differs from the one the checkpoint saw")
+    for name, dim, index, digest in (
+            ("history.nc", "time", pos.history_rows - 1, pos.history_digest),
+            ("snapshots.nc", "snapshot", pos.snapshots - 1, pos.snapshots_digest)):
+        if digest and record_digest(out / name, dim, index) != digest:
+            raise ValueError(f"{name} is not what the checkpoint was written with: its {dim} "
+                             f"record {index} differs from the one the checkpoint saw")
 
 
 def _loop(model: Model, s_in: State | None, resumed, out: Path | None,
