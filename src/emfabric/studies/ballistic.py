@@ -278,15 +278,12 @@ def ballistic_limit(scenario: Scenario, out, *, seeds: int = 0, tolerance: float
     # what the limit is of: the whole scenario the shots were varied from (its --set overrides
     # applied), and the package that fired them
     result["base_scenario"] = scenario.to_toml()
-    result["emfabric_version"] = _version()
+    from emfabric import __version__
+
+    result["emfabric_version"] = __version__
     result["non_monotone"] = non_monotone(shots, result["v_bl"])
     return result
 
-
-def _version() -> str:
-    from emfabric import __version__
-
-    return __version__
 
 
 def seeded_shots(fire, scenario: Scenario, v_bl: float,

@@ -118,6 +118,7 @@ def design_field(scenario: Scenario, tilt: float, by: float, out, *,
     the probes are all written to probes.json, and the figure shows them)."""
     from pathlib import Path
 
+    from emfabric import __version__
     from emfabric.sources.scaling import field_at_centre, scale_field
     from emfabric.studies.sweep import (
         Case,
@@ -233,10 +234,5 @@ def design_field(scenario: Scenario, tilt: float, by: float, out, *,
             "probes": [{"scale": p.scale, "max_tilt": p.tilt, "status": p.status}
                        for p in sorted(probes.values(), key=lambda p: p.scale)],
             "runs": len(probes), "scenario": scenario.name,
-            "base_scenario": scenario.to_toml(), "emfabric_version": _version()}
+            "base_scenario": scenario.to_toml(), "emfabric_version": __version__}
 
-
-def _version() -> str:
-    from emfabric import __version__
-
-    return __version__
