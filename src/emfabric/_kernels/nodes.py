@@ -353,13 +353,15 @@ def _scaled_segments(buf, scale, r, col, count):
 
 
 @njit(cache=True, _nrt=False)
-def _block_start(j0, phys, prev, sin, sout, work, buf, mode, dt):
+def _block_start(j0, phys, prev, sin, sout, work, buf, mode, dt, base):
     """Prepare a block's row buffer before its first row j0: zero the padding of the warp row
     and set the fill tensions (with mode & TANGENT their stiffness, with mode & VISCOUS their
-    viscous part at the rate since sin.x over the step dt) from the row below (recomputed,
-    writing no damage or averaged stretch, so that blocks are independent; zero for the first
-    row of a ply). Returns the
-    first buffer rows (fill up, fill down): ROW_FILL_UP, ROW_FILL_DOWN."""
+    viscous part at the rate since the positions `base` over the step dt: the base the block's
+    rows take theirs from, RowArrays.base) from the row below (recomputed, writing no damage or
+    averaged stretch, so that blocks are independent; zero for the first row of a ply): the
+    same numbers as the row below computes, so that the threaded kernel's blocks give the
+    serial kernel's. Returns the first buffer rows (fill up, fill down): ROW_FILL_UP,
+    ROW_FILL_DOWN."""
     nodes, yarns, mat = phys.nodes, phys.yarns, phys.material
     rows = nodes.rows
     inv_dt = 1.0 / dt if dt > 0.0 else 0.0
@@ -374,7 +376,7 @@ def _block_start(j0, phys, prev, sin, sout, work, buf, mode, dt):
         _tensions(prev, (a, nx, s, nx), (yarns.inv_rest2[s], 0.0),
                   (sin.alpha, sout.alpha, sin.strain, sout.strain, yarns.averaging_rate, dt),
                   work.damage_thr, yarns.stiffness, mat, buf, (int64(ROW_FILL_DOWN), int64(0)),
-                  mode & (TANGENT | VISCOUS), (yarns.damping, sin.x, inv_dt))
+                  mode & (TANGENT | VISCOUS), (yarns.damping, base, inv_dt))
     else:
         buf[ROW_FILL_DOWN:ROW_FILL_DOWN + 4] = 0.0
         buf[ROW_FILL_DOWN + VISC:ROW_FILL_DOWN + VISC + 3] = 0.0
@@ -477,7 +479,7 @@ def _row_block(j0, j1, phys, prev, sin, sout, work, t1, phi, dt, buf):
     skip_err = work.flag
     err_num, err_den = work.err_num, work.err_den
     inv_mass, charge = nodes.inv_mass, nodes.charge
-    ru, rd = _block_start(j0, phys, prev, sin, sout, work, buf, 0, dt)
+    ru, rd = _block_start(j0, phys, prev, sin, sout, work, buf, 0, dt, sin.x)
     rf, ra, rr = ROW_FORCE, ROW_VEL_EXPLICIT, ROW_ROTATION
     # arrays indexed directly with unsigned indices, no row views (_tensions says why)
     for j in range(j0, j1):
@@ -819,7 +821,8 @@ def _kick_block(j0, j1, phys, sin, sout, work, t1, dt, buf):
     frame = work.frame
     cx, cy, cz = frame[0, 0], frame[0, 1], frame[0, 2]
     dirx, diry, dirz = frame[1, 0], frame[1, 1], frame[1, 2]
-    ru, rd = _block_start(j0, phys, x1, sin, sout, work, buf, mode, dt)
+    ru, rd = _block_start(j0, phys, x1, sin, sout, work, buf, mode, dt,
+                          work.visc_base)
     inv_mass, mass, charge = nodes.inv_mass, nodes.mass, nodes.charge
     fo, eo = sout.f, sout.e
     rf = ROW_FORCE
