@@ -9,6 +9,7 @@ import pytest
 import xarray as xr
 from matplotlib.tri import LinearTriInterpolator, Triangulation
 
+from emfabric._kernels.records import BODY_W
 from emfabric.config.scenario import ScenarioError, load_scenario
 from emfabric.runner.loop import run
 from emfabric.sim.builder import build_model
@@ -163,6 +164,31 @@ def test_free_pack_struck_obliquely_keeps_its_angular_momentum_to_first_order():
         errors.append(np.linalg.norm(ang - ang[0], axis=1).max() / np.linalg.norm(ang[0]))
     assert errors[0] < 4e-4
     assert (errors[0] / errors[-1]) ** 0.5 >= 1.8, errors
+
+
+def test_the_reaction_meets_a_folded_ply_where_its_mirror_image_does():
+    """_facet on a ply folded into a ridge along x (5 × 5 nodes, z = −|y|/2 on a unit grid,
+    exact in binary): a node at x = 0 under the ridge, its line of action along +y in the
+    plane x = 0, meets both flanks on the column of nodes at x = 0, each at a least weight of
+    exactly 0 (the point on a facet's edge). The reaction goes where the line meets the ply
+    nearest the node, (0, 0.5, −0.25), not (0, −0.5, −0.25), and for the mirror image (y → −y)
+    to the mirror image of that point: taken in the search's order, the two gave the same
+    point, and a reversed field did not mirror a torn pack."""
+    from emfabric._kernels.plies import _facet
+
+    j, i = np.mgrid[0:5, 0:5]
+    grid_x = np.vstack([(i - 2.0).ravel(), (j - 2.0).ravel(), -0.5 * np.abs(j - 2.0).ravel()])
+    mass = np.ones(26)
+    points = []
+    for side in (1.0, -1.0):
+        x = np.hstack([grid_x, [[0.0], [0.25 * side], [-0.25]]])
+        least, a, t, cu, cw, cv = _facet(x, 25, (0.0, side, 0.0), (12, 0, 5, 5, 2, 2), mass)
+        quad = (a, a + 1, a + 6, a + 5)
+        centre = x[:, list(quad)].mean(axis=1)
+        points.append(cu * x[:, quad[t]] + cw * x[:, quad[(t + 1) % 4]] + cv * centre)
+        assert least == 0.0
+    np.testing.assert_array_equal(points[0], [0.0, 0.5, -0.25])
+    np.testing.assert_array_equal(points[1], [0.0, -0.5, -0.25])
 
 
 def test_ply_forces_have_no_moment():
@@ -427,6 +453,27 @@ def test_a_pack_gives_the_same_numbers_on_any_thread_count():
     assert float(one.history.max_deflection_per_ply[-1, 1]) > 0.0
     for name in ("node_x", "node_v", "body"):
         np.testing.assert_array_equal(getattr(one.state, name), getattr(two.state, name))
+
+
+def test_a_viscous_torn_pack_gives_the_same_numbers_on_any_thread_count():
+    """Brittle plies have a bulk viscosity, whose rate the kick takes from where ply contact's
+    placements put a node a step back (records.Work.visc_base): the threaded kernel's block
+    that starts at a row of placed nodes recomputes the fill tensions from the row below with
+    that same base, so that the FSP's head-on strike of three plies (threads: blocks of 16 rows,
+    the third ply's row 14 under the FSP) is the serial run bit for bit, and stays mirror
+    symmetric. With the base of the step's start there, the two-thread run spun the FSP
+    (ω_x = −3394 rad/s by 40 µs)."""
+    sc = load_scenario("pack-fsp", {"fabric.size": [0.05, 0.05], "fabric.nodes": [25, 25],
+                                    "fabric.plies": 3, "fabric.material.modulus_cv": 0.0,
+                                    "field.B": [0.0, 0.0, 0.0], "solver.end_time": 3e-6})
+    assert build_model(sc).physics.yarns.damping.size > 0  # brittle: viscous by default
+    one, two = run(sc, threads=1), run(sc, threads=2)
+    assert int(one.history.contact_nodes.max()) >= 1
+    assert float(one.history.max_deflection_per_ply[-1, 2]) > 0.0
+    for name in ("node_x", "node_v", "node_fv", "body"):
+        np.testing.assert_array_equal(getattr(one.state, name), getattr(two.state, name),
+                                      err_msg=name)
+    np.testing.assert_array_equal(two.state.body[BODY_W], 0.0)
 
 
 @pytest.mark.parametrize("integrator", ["central-difference", "phi"])

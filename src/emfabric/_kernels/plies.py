@@ -362,13 +362,16 @@ def _facet(x, n, d, grid, mass):
     (grid = (that node, master's first node, nx, ny, ci, cj)) is four triangles, one per edge
     with the quad's centre (the mean of its corners: the same facets for a mirror image, where
     splitting the quad along a diagonal would not be); of the sixteen, the one whose weights of
-    the meeting point have the largest least weight. Returns (that least weight, −inf if no line
+    the meeting point have the largest least weight, and of those that tie, the one whose
+    meeting point is nearest x_n (the smallest |λ|; then the first in the search's order).
+    Returns (that least weight, −inf if no line
     meets a facet; the quad's first node a, its corners a, a + 1, a + 1 + nx, a + nx in cyclic
     order; t, the facet's edge from corner t to corner t + 1; the weights of corner t, corner
     t + 1 and the centre): Σ of the weights times the vertices is the meeting point, to
     round-off."""
     _k0, m0, mnx, mny, ci, cj = grid
     best = -math.inf
+    best_lam = math.inf
     best_a, best_t = -1, 0
     best_u, best_w, best_v = 0.0, 0.0, 0.0
     xn0, xn1, xn2 = x[0, n], x[1, n], x[2, n]
@@ -405,8 +408,15 @@ def _facet(x, n, d, grid, mass):
                 cv = _cross_dot(x[0, u] - q0, x[1, u] - q1, x[2, u] - q2,
                                 x[0, w] - q0, x[1, w] - q1, x[2, w] - q2, nf) / area
                 least = min(cu, min(cw, cv))
-                if least > best:
+                # ties (a line in a plane of grid nodes meets every facet with an edge there
+                # at a weight of exactly 0, at different points where the ply is folded):
+                # the nearer meeting point, which a mirror image chooses alike; the search's
+                # order does not mirror, and a reversed field did not mirror a torn pack
+                # (tests/test_plies.py)
+                near = abs(lam)
+                if least > best or (least == best and near < best_lam):
                     best = least
+                    best_lam = near
                     best_a, best_t = a, t
                     best_u, best_w, best_v = cu, cw, cv
     return best, best_a, best_t, best_u, best_w, best_v
