@@ -108,6 +108,14 @@ def test_unreadable_input_file_exits_2_in_one_line(tmp_path):
     r = _cli("plot", run_dir)
     assert r.returncode == 2
     _one_error_line(r, f"cannot read {run_dir / 'history.nc'}")
+    # a netCDF file with nothing in it (what a kill at start-up once left): no KeyError 'time'
+    import netCDF4
+
+    (run_dir / "history.nc").unlink()
+    netCDF4.Dataset(run_dir / "history.nc", "w").close()
+    r = _cli("plot", run_dir)
+    assert r.returncode == 2
+    _one_error_line(r, "has no variable 'time'")
     bad = tmp_path / "bad.toml"
     bad.write_bytes(b"\xff\xfe")
     r = _cli("validate", bad)

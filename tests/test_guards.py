@@ -428,6 +428,7 @@ def test_status_in_place_never_grows_the_header(tmp_path):
         np.testing.assert_array_equal(ds["x"].values, np.arange(100.0))
     assert path.stat().st_size == size
     assert not mark_status(tmp_path / "none.nc", "failed", "x")
+    assert not (tmp_path / "none.nc").exists()  # netCDF4's "a" would have created it
 
 
 def test_temporary_names_are_reported_as_the_file_they_stand_for():

@@ -202,17 +202,29 @@ def writing(*outputs: Path) -> Iterator[None]:
         raise typer.Exit(EXIT_INPUT) from None
 
 
+_RUN_FILE_HOLDS = {"history.nc": "time", "snapshots.nc": "time"}
+"""The variable a run's file has from its first record on (a netCDF file without it, such as an
+empty one a crash left, is not one emfabric wrote)."""
+
+
 def check_readable(*paths: Path) -> None:
     """Exit 2 with one line if one of the netCDF files given (those that exist) cannot be
-    opened: an input the command would otherwise fail on with a library's traceback."""
+    opened, or is a run's history.nc or snapshots.nc without its `time`: an input the command
+    would otherwise fail on with a library's traceback."""
     import netCDF4
 
     for path in paths:
         if not path.is_file():
             continue
+        needed = _RUN_FILE_HOLDS.get(path.name)
         try:
-            netCDF4.Dataset(path, "r").close()
+            with netCDF4.Dataset(path, "r") as nc:
+                lacking = needed is not None and needed not in nc.variables
         except (OSError, RuntimeError, ValueError) as err:
             why = getattr(err, "strerror", None) or str(err)
             error(f"cannot read {path}: {why} (not a netCDF file emfabric wrote?)")
             raise typer.Exit(EXIT_INPUT) from None
+        if lacking:
+            error(f"cannot read {path}: it has no variable '{needed}' (not a run's file "
+                  "emfabric wrote, or one cut short before its first record)")
+            raise typer.Exit(EXIT_INPUT)

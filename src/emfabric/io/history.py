@@ -188,6 +188,8 @@ def mark_status(path: Path, status: str, end_reason: str, wall_time: str | None 
     def room(text) -> int:  # bytes of header a text attribute takes (padded to 4)
         return -(-len(str(text).encode("utf-8")) // 4) * 4
 
+    if not Path(path).is_file():
+        return False  # (netCDF4's "a" would create an empty file, which no run can read)
     try:
         nc = netCDF4.Dataset(path, "a")
     except (OSError, RuntimeError):
