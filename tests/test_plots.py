@@ -91,6 +91,18 @@ def test_overlay_doubles_the_lines(field_run, nofield_run):
     assert [t.get_text() for t in fig.legends[0].get_texts()] == ["a", "b"]
 
 
+def test_overlay_legend_of_long_labels_stays_on_the_figure(field_run):
+    """Labels of runs that differ in many settings are wrapped and listed one per row: the
+    legend lies within the figure (three columns of such labels ran off both edges)."""
+    ds = plots.open_history(field_run)
+    long = ", ".join(f"fabric.setting_{k} = {k / 7:.4f}" for k in range(6))
+    fig = plots.energy_figure([ds, ds, ds], [long + " (a)", long + " (b)", "short"])
+    fig.canvas.draw()
+    box = fig.legends[0].get_window_extent()
+    page = fig.bbox
+    assert page.x0 <= box.x0 and box.x1 <= page.x1 and page.y0 <= box.y0, (box, page)
+
+
 def test_energy_figure_terms_and_units(field_run):
     """The energy figure draws every budget term and the balance error, all in [J]."""
     h = plots.open_history(field_run)
@@ -189,6 +201,13 @@ def test_fabric_alone_draws_no_sphere(tmp_path):
         fig = plots.sequence_figure(s, count=2)
     for ax in (a for a in fig.axes if isinstance(a, Axes3D)):
         assert len(ax.collections) == 1
+    # no spin figure, and a velocity figure of the deflection alone (no empty panels)
+    files = plots.plot_runs([run_dir], tmp_path / "figs")
+    assert sorted({f.stem for f in files}) == ["energy", "impact_sequence", "velocity"]
+    with plots.open_history(run_dir) as ds:
+        fig = plots.velocity_figure(ds)
+    assert len(fig.axes) == 1 and len(fig.axes[0].lines) == 1
+    assert float(np.nanmax(fig.axes[0].lines[0].get_ydata())) > 0.0
 
 
 def test_flat_damage_gets_a_tiny_range_ending_at_the_value():
@@ -302,6 +321,21 @@ def test_package_import_of_plots_loads_no_numba():
     code = "import emfabric.viz.plots, sys; assert 'numba' not in sys.modules"
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr
+
+
+def test_a_study_metric_without_a_value_is_said_not_dropped(tmp_path, caplog):
+    """Two cases both still in contact at their end time (perforated = −1 in each): the other
+    metrics are drawn, and the perforation figure, which has nothing to draw, is named in a
+    warning instead of missing without a word."""
+    from emfabric.viz import study_plots
+
+    xr.Dataset({"residual_speed": (("field.B",), [240.0, 230.0]),
+                "perforated": (("field.B",), np.array([-1, -1], dtype=np.int8))},
+               coords={"field.B": [0.0, 0.05]}).to_netcdf(tmp_path / "results.nc")
+    with caplog.at_level(logging.WARNING):
+        files = study_plots.study_figures(tmp_path)
+    assert {f.name for f in files} == {"study_residual_speed.png", "study_residual_speed.pdf"}
+    assert any("study_perforated not drawn" in r.getMessage() for r in caplog.records)
 
 
 def test_a_study_folder_without_axes_is_one_line_not_a_traceback(tmp_path):

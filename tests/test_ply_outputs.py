@@ -150,6 +150,15 @@ def test_plot_and_animate_a_pack(which, request, tmp_path):
         fig = plots.sequence_figure(snaps)
         count = len(plots.pick_snapshots(snaps["time"].values))
         live = int(snaps["segment_carries_load"].values.sum())
+        # the projectile's y moved a third of a spacing off the middle grid line: the section
+        # is that line, and its label gives the line's y, not the projectile's
+        ref = snaps["reference_position"].values
+        off = snaps.copy(deep=True)
+        off["projectile_position"][:, 1] += (ref[NODES, 1] - ref[0, 1]) / 3
+        drawn_y = float(ref[plots.section_nodes(off)[0][0], 1])
+        assert drawn_y == float(ref[plots.section_nodes(snaps)[0][0], 1])
+        label = plots.SectionView(plots.new_figure((4, 2)).add_subplot(), off).ax.get_xlabel()
+        assert f"section at y = {drawn_y * 1e3:.3g} mm" in label
     sections = [ax for ax in fig.axes if ax.name != "3d" and ax.get_ylabel() == "z [m]"]
     assert len(sections) == count
     for ax in sections:

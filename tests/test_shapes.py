@@ -453,6 +453,8 @@ def test_outputs_show_the_real_shape(tmp_path):
         k = s.sizes["snapshot"] - 1
         rot = s["projectile_rotation"].values[k]
         centre = s["projectile_position"].values[k]
+        v_cm = s["projectile_velocity"].values[k]
+        omega = s["angular_velocity"].values[k]
     # the stored points lie on the ogive: in the shape frame, on its profile
     q = pts @ model.body.frame.T
     s_ = q[:, 2] + geo.base
@@ -463,6 +465,11 @@ def test_outputs_show_the_real_shape(tmp_path):
     vtu = meshio.read(out / "vtk" / f"projectile_{k:05d}.vtu")
     np.testing.assert_allclose(vtu.points, pts @ rot.T + centre, atol=1e-12)
     assert not np.allclose(rot, np.eye(3))  # it turned, and the mesh with it
+    # each surface point's velocity is the rigid body's there, v + ω × r (not v alone)
+    r = vtu.points - centre
+    np.testing.assert_allclose(vtu.point_data["velocity"], v_cm + np.cross(omega, r),
+                               rtol=0, atol=1e-9 * np.abs(v_cm).max())
+    assert np.ptp(vtu.point_data["velocity"][:, 0]) > 1.0  # the spin shows
     with plots.open_snapshots(out) as s:
         fig = plots.sequence_figure(s, count=2)
     ax = [a for a in fig.axes if isinstance(a, Axes3D)][-1]

@@ -255,13 +255,15 @@ class Snapshots:
             pts, tris = self._surface
             rot = b[BODY_R0:BODY_R0 + 3]
             nose = rot @ m.body.nose
-            world = pts @ rot.T + b[BODY_X]
+            arm = pts @ rot.T  # from the centre of mass
+            world = arm + b[BODY_X]
             # +1 at the nose, −1 opposite: how each surface point lies along the nose axis
             along = (pts @ (m.body.nose / np.linalg.norm(m.body.nose))) / m.geometry.bound
             body_mesh = meshio.Mesh(
                 points=world, cells=[("triangle", tris)],
+                # each surface point's own velocity, v + ω × r (the spin shows)
                 point_data={"nose_alignment": along,
-                            "velocity": np.tile(b[BODY_V], (len(pts), 1))},
+                            "velocity": b[BODY_V] + np.cross(b[BODY_W], arm)},
                 field_data={"nose": nose},
             )
             write_atomic(folder / f"projectile_{k:05d}.vtu", lambda tmp: meshio.write(

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import logging
 import math
+import textwrap
 import tomllib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -269,13 +270,21 @@ def _panel(ax, histories: Sequence[xr.Dataset], series: Sequence[_Series], *,
         ax.legend(handles=handles, loc="best", ncols=2 if len(series) > 3 else 1)
 
 
+LEGEND_WIDTH = 90
+"""Characters of a run's label per line in an overlay's legend (the figure's width at its font
+size): longer labels are wrapped, and then listed one under the other, never cut off."""
+
+
 def _run_legend(fig: Figure, labels: Sequence[str], colour_by: str) -> None:
+    # three columns while the labels fit a third of the width; wrapped, one column, else
+    columns = min(len(labels), 3) if max(map(len, labels)) <= LEGEND_WIDTH // 3 - 4 else 1
+    labels = [textwrap.fill(lab, LEGEND_WIDTH) for lab in labels]
     if colour_by == "run":
         handles = [Line2D([], [], color=f"C{i % 10}", label=lab) for i, lab in enumerate(labels)]
     else:
         handles = [Line2D([], [], color="k", linestyle=_LINESTYLES[i % 4], label=lab)
                    for i, lab in enumerate(labels)]
-    fig.legend(handles=handles, loc="outside lower center", ncols=min(len(labels), 3))
+    fig.legend(handles=handles, loc="outside lower center", ncols=columns)
 
 
 def _finish(fig: Figure, axes, what: str, histories: Sequence[xr.Dataset],
@@ -408,15 +417,32 @@ def energy_figure(histories: Sequence[xr.Dataset] | xr.Dataset,
     return fig
 
 
+def has_projectile(ds: xr.Dataset) -> bool:
+    """Whether the run had a projectile (a history without the attribute, written before it
+    was recorded, had one)."""
+    return bool(int(ds.attrs.get("has_projectile", 1)))
+
+
 def velocity_figure(histories: Sequence[xr.Dataset] | xr.Dataset,
                     labels: Sequence[str] | None = None) -> Figure:
-    """Projectile velocity (v_z and speed; v_x, v_y) [m/s] and largest deflection [mm] vs time."""
+    """Projectile velocity (v_z and speed; v_x, v_y) [m/s] and largest deflection [mm] vs time;
+    the deflection alone where no run had a projectile."""
     histories = _as_list(histories)
 
     def comp(c: int):
         return lambda ds: ds["projectile_velocity"].values[:, c]
 
+    deflection = _Series("max deflection", lambda ds: ds["max_deflection"].values * 1e3,
+                         "tab:purple")
     with matplotlib.rc_context(STYLE):
+        if not any(has_projectile(ds) for ds in histories):
+            fig = new_figure((8.0, 3.6))
+            axes = [fig.subplots(1, 1)]
+            _panel(axes[0], histories, [deflection], colour_by="run",
+                   ylabel="max deflection [mm]")
+            axes[0].set_title("largest out-of-plane node displacement", loc="left")
+            _finish(fig, axes, "fabric deflection (no projectile)", histories, labels, "run")
+            return fig
         fig = new_figure((8.0, 8.5))
         axes = fig.subplots(3, 1, sharex=True)
         speed = _Series("speed |v|", lambda ds: np.linalg.norm(
@@ -426,8 +452,6 @@ def velocity_figure(histories: Sequence[xr.Dataset] | xr.Dataset,
         _panel(axes[1], histories, [_Series("$v_x$", comp(0), _AXIS_COLOURS[0]),
                                     _Series("$v_y$", comp(1), _AXIS_COLOURS[1])],
                colour_by="run", ylabel="velocity [m/s]")
-        deflection = _Series("max deflection", lambda ds: ds["max_deflection"].values * 1e3,
-                             "tab:purple")
         _panel(axes[2], histories, [deflection], colour_by="run", ylabel="max deflection [mm]")
         axes[0].set_title("projectile velocity", loc="left")
         axes[1].set_title("projectile velocity, in-plane components", loc="left")
@@ -678,8 +702,12 @@ class SectionView:
         ax.set_ylim(*limits[1])
         ax.ticklabel_format(axis="both", style="sci", scilimits=(-2, 3))
         ax.tick_params(labelsize=7)
-        ax.set_xlabel(f"x [m]   (section at y = {section_y(snapshots) * 1e3:.3g} mm)",
-                      fontsize=8)
+        # the y of the grid line drawn (the top ply's, at rest), not the projectile's, which
+        # can fall between two lines
+        ref = snapshots["reference_position"].values
+        drawn = next((line for line in self.nodes if line.size), None)
+        y_line = float(ref[drawn[0], 1]) if drawn is not None else section_y(snapshots)
+        ax.set_xlabel(f"x [m]   (section at y = {y_line * 1e3:.3g} mm)", fontsize=8)
         ax.set_ylabel("z [m]", fontsize=8)
         if legend:
             ax.legend(loc="best", fontsize=7, ncols=min(len(self.lines), 4),
@@ -784,7 +812,8 @@ def plot_runs(runs: list[Path], out: Path | None = None) -> list[Path]:
     """Draw and save the figures of one run, or the overlays of several; return the files.
 
     One run: ``spin``, ``impact_sequence``, ``energy``, ``velocity`` (.png and .pdf) in
-    ``out`` or ``RUN/figures``. Several runs: ``compare_spin``, ``compare_energy``,
+    ``out`` or ``RUN/figures``; without a projectile no ``spin``, and ``velocity`` the
+    deflection alone. Several runs: ``compare_spin``, ``compare_energy``,
     ``compare_velocity`` in ``out`` or the first run's ``figures``, labelled by what differs
     between their scenarios. An incomplete run is drawn with its status in the title.
     """
@@ -799,9 +828,14 @@ def plot_runs(runs: list[Path], out: Path | None = None) -> list[Path]:
         if note:
             log.warning("%s is not a complete run (%s); drawing what it holds", r, note)
     files: list[Path] = []
+    # the spin figure is the projectile's: none where no run had one
+    spin = any(has_projectile(ds) for ds in histories)
+    if not spin:
+        log.info("no projectile in %s: no spin figure", ", ".join(str(r) for r in runs))
     if len(runs) == 1:
         ds, name = histories[0], run_name(histories[0], runs[0])
-        files += save_figure(spin_figure([ds], [name]), out_dir / "spin")
+        if spin:
+            files += save_figure(spin_figure([ds], [name]), out_dir / "spin")
         if (runs[0] / "snapshots.nc").is_file():
             with open_snapshots(runs[0]) as snaps:
                 fig = sequence_figure(snaps, history=ds, title=f"{name}: impact sequence")
@@ -813,7 +847,8 @@ def plot_runs(runs: list[Path], out: Path | None = None) -> list[Path]:
     else:
         names = [r.resolve().name for r in runs]
         labels = scenario_labels(histories, names)
-        files += save_figure(spin_figure(histories, labels), out_dir / "compare_spin")
+        if spin:
+            files += save_figure(spin_figure(histories, labels), out_dir / "compare_spin")
         files += save_figure(energy_figure(histories, labels), out_dir / "compare_energy")
         files += save_figure(velocity_figure(histories, labels), out_dir / "compare_velocity")
     return files

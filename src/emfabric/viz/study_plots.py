@@ -14,6 +14,7 @@ each sampled setting.
 from __future__ import annotations
 
 import json
+import logging
 import math
 import re
 import typing
@@ -27,6 +28,8 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
 from emfabric.viz.plots import _SCALARS, _VECTORS, _math, new_figure, save_figure
+
+log = logging.getLogger(__name__)
 
 PLOTTED = ("residual_speed", "max_tilt", "max_yaw", "final_angular_velocity",
            "energy_absorbed", "broken_yarns", "max_deflection", "perforated", "wall_time")
@@ -448,6 +451,11 @@ def study_figures(study_dir: str | Path, out: str | Path | None = None) -> list[
         fig = metric_figure(ds, name)
         if fig is not None:
             files += save_figure(fig, out / f"study_{name}")
+        elif name in ds:
+            # said, not dropped in silence: e.g. every case still in contact at its end time
+            # leaves `perforated` undecided (−1) in each
+            log.warning("study_%s not drawn: no case of %s has a value of %s (undecided, "
+                        "diverged or failed in every case)", name, path, name)
     return files
 
 
