@@ -262,6 +262,7 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, pen
         # master nodes around the point where its line of action meets master's surface
         # (_spread): impulses (or forces) in rx, placements in px
         rx0, rx1, rx2 = int64(0), int64(0), int64(0)
+        px0, px1, px2 = int64(0), int64(0), int64(0)
         for dj in range(-bj, bj + 1):
             for di in range(-bi, bi + 1):
                 w = shares[0, (dj + bj) * wide + di + bi]
@@ -321,14 +322,15 @@ def _pass(phys, master, slave, sign, x, v, nrm, acc, nearest, shares, boxes, pen
                     if move_n:
                         acc[1, c, n] += units
                     if move_k:
-                        # the pair's own master node: a placement resolves that pair's
-                        # overlap and carries no momentum (spread over the facet of the
-                        # impulses' line of action, as in f720af1, it moved nodes that did not
-                        # overlap, and an FSP's chisel edge pumped a pack's energy up until
-                        # the guard stopped it: docs/packs.md)
-                        acc[1, c, km] -= units
-        _spread(x, n, acc, (rx0, rx1, rx2), (m0 + cj * mnx + ci, m0, mnx, mny, ci, cj),
-                _normal(nrm, m0 + cj * mnx + ci, ci, cj, box, sign), mass)
+                        if c == 0:
+                            px0 += units
+                        elif c == 1:
+                            px1 += units
+                        else:
+                            px2 += units
+        _spread(x, n, acc, (rx0, rx1, rx2), (px0, px1, px2),
+                (m0 + cj * mnx + ci, m0, mnx, mny, ci, cj),
+                _normal(nrm, m0 + cj * mnx + ci, ci, cj, box, sign), mass, driven, steered)
 
 
 FACET_SLACK = 1e-9
@@ -421,7 +423,7 @@ def _facet(x, n, d, grid, mass):
 
 
 @njit(cache=True, _nrt=False)
-def _spread(x, n, acc, r, grid, normal, mass):
+def _spread(x, n, acc, r, pl, grid, normal, mass, driven, steered):
     """Node n's reaction on its master ply: n receives the impulses (or forces) r of its pairs
     (integers), and master the opposite, spread over the four master nodes around the point
     where their line of action through x_n meets master's surface (_facet), so that action and
@@ -429,15 +431,18 @@ def _spread(x, n, acc, r, grid, normal, mass):
     the momentum (n receives exactly the sum of the parts its master nodes give back). Applied
     at each pair's master node, as before, the reaction's moment differed from the action's by
     the pair's in-plane offset (up to a node spacing) times its impulse, and a free pack's
-    angular momentum drifted by an amount that did not shrink with the step. (Placements are
-    not spread: they stay on each pair's own nodes, _pass.) grid: _facet's; normal: master's
-    normal at the nearest master node, the line taken where the line of action meets no facet
-    around it (FACET_SLACK: there the moment of the reaction's part along the surface is kept
-    only to the pair's gap times it); a line that misses them too (a slave beyond master's
-    edge) leaves the whole reaction on the nearest master node, grid[0]."""
-    if r[0] == 0 and r[1] == 0 and r[2] == 0:
+    angular momentum drifted by an amount that did not shrink with the step. The master's
+    placements pl (integers, mass times distance) are spread with the same weights over the
+    master nodes the projectile does not drive. grid: _facet's; normal: master's normal at the
+    nearest master node, the line taken where the line of action meets no facet around it
+    (FACET_SLACK: there the moment of the reaction's part along the surface is kept only to
+    the pair's gap times it); a line that misses them too (a slave beyond master's edge) leaves
+    the whole reaction on the nearest master node, grid[0]."""
+    if r[0] == 0 and r[1] == 0 and r[2] == 0 and pl[0] == 0 and pl[1] == 0 and pl[2] == 0:
         return
     d = (float(r[0]), float(r[1]), float(r[2]))
+    if d[0] == 0.0 and d[1] == 0.0 and d[2] == 0.0:
+        d = (float(pl[0]), float(pl[1]), float(pl[2]))
     least, a, t, cu, cw, cv = _facet(x, n, d, grid, mass)
     if least < -FACET_SLACK:
         least, a, t, cu, cw, cv = _facet(x, n, normal, grid, mass)
@@ -466,6 +471,10 @@ def _spread(x, n, acc, r, grid, normal, mass):
         got0 += u0
         got1 += u1
         got2 += u2
+        if not (steered and driven[k] != 0.0):
+            acc[1, 0, k] -= _units(weight * float(pl[0]), 1.0)
+            acc[1, 1, k] -= _units(weight * float(pl[1]), 1.0)
+            acc[1, 2, k] -= _units(weight * float(pl[2]), 1.0)
     acc[0, 0, n] += got0
     acc[0, 1, n] += got1
     acc[0, 2, n] += got2
