@@ -285,7 +285,6 @@ def ballistic_limit(scenario: Scenario, out, *, seeds: int = 0, tolerance: float
     return result
 
 
-
 def seeded_shots(fire, scenario: Scenario, v_bl: float,
                  seeds: int) -> tuple[list[dict[str, Any]], int]:
     """The decided shots of seeds 1..`seeds` (each its modulus draw and its impact point moved

@@ -235,4 +235,3 @@ def design_field(scenario: Scenario, tilt: float, by: float, out, *,
                        for p in sorted(probes.values(), key=lambda p: p.scale)],
             "runs": len(probes), "scenario": scenario.name,
             "base_scenario": scenario.to_toml(), "emfabric_version": __version__}
-

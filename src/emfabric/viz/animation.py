@@ -26,6 +26,7 @@ from emfabric.viz.plots import (
     SheetView,
     damage_colourbar,
     damage_range,
+    has_projectile,
     new_figure,
     open_history,
     open_snapshots,
@@ -65,7 +66,7 @@ def render_frames(snapshots: xr.Dataset, history: xr.Dataset | None = None,
     (``SectionView``) runs under it.
     """
     count = snapshots.sizes["snapshot"]
-    body = bool(int(snapshots.attrs.get("has_projectile", 1)))
+    body = has_projectile(snapshots)
     meta = history if history is not None else snapshots
     name, note = run_name(meta), status_note(meta)
     norm = Normalize(*damage_range_all(snapshots))

@@ -418,8 +418,8 @@ def energy_figure(histories: Sequence[xr.Dataset] | xr.Dataset,
 
 
 def has_projectile(ds: xr.Dataset) -> bool:
-    """Whether the run had a projectile (a history without the attribute, written before it
-    was recorded, had one)."""
+    """Whether the run of a history.nc or snapshots.nc had a projectile (a file without the
+    attribute, written before it was recorded, had one)."""
     return bool(int(ds.attrs.get("has_projectile", 1)))
 
 
@@ -520,7 +520,7 @@ def scene_limits(snapshots: xr.Dataset, indices: Sequence[int]) -> np.ndarray:
         lo, hi = np.minimum(lo, x.min(axis=0)), np.maximum(hi, x.max(axis=0))
     radius = float(snapshots.attrs.get("projectile_size",
                                        snapshots.attrs.get("projectile_radius", 0.0)))
-    if int(snapshots.attrs.get("has_projectile", 1)) and radius > 0:
+    if has_projectile(snapshots) and radius > 0:
         body = snapshots["projectile_position"].values[np.asarray(indices, dtype=int)]
         reach = NOSE_ARROW * radius
         lo = np.minimum(lo, body.min(axis=0) - reach)
@@ -559,7 +559,7 @@ class SheetView:
         self.shown = shown_segments(snapshots)
         self.seg = snapshots["segment_nodes"].values.astype(np.int64)[self.shown]
         self.radius = float(snapshots.attrs.get("projectile_radius", 0.0))
-        if not int(snapshots.attrs.get("has_projectile", 1)):
+        if not has_projectile(snapshots):
             self.radius = 0.0
         self.nose = snapshots["projectile_nose_body"].values
         self._sphere = _unit_sphere() * self.radius  # body frame, shape (3, n_lat, n_lon)
@@ -629,7 +629,7 @@ def section_y(snapshots: xr.Dataset) -> float:
     sheet."""
     ref = snapshots["reference_position"].values[shown_nodes(snapshots)]
     y = 0.0
-    if int(snapshots.attrs.get("has_projectile", 1)) and snapshots.sizes["snapshot"]:
+    if has_projectile(snapshots) and snapshots.sizes["snapshot"]:
         y = float(snapshots["projectile_position"][0, 1])
     return float(np.clip(y, ref[:, 1].min(), ref[:, 1].max()))
 
@@ -788,7 +788,7 @@ def sequence_figure(snapshots: xr.Dataset, count: int = 6, history: xr.Dataset |
             SheetView(ax, snapshots, norm, limits).update(snapshots, int(k))
             t = float(snapshots["time"][k]) * _US
             angles = f"Θ = {snapshot_tilt_deg(snapshots, k, history):.2f}°"
-            if int(snapshots.attrs.get("has_projectile", 1)):
+            if has_projectile(snapshots):
                 angles += f",  ψ = {snapshot_yaw_deg(snapshots, k, history):.2f}°"
             ax.set_title(f"t = {t:.1f} µs,  {angles}", fontsize=10)
         if pack:
